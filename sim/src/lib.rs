@@ -1,0 +1,35 @@
+//! # sim — the muscle-rally simulator
+//!
+//! Physics only: the ball world (flight, table, net and paddle contacts), the rules of a legal
+//! return, ballistic prediction and the serve generators. Later issues add the musculoskeletal model
+//! (MJCF loader, rigid-body dynamics, muscles) and the arena's episode and rally state machines.
+//!
+//! **Must never**: do I/O, spawn threads, read the clock, or draw a random number the caller did not
+//! seed. Same inputs give bit-identical outputs. Policies, rewards and observations live in `agents`.
+//!
+//! Laid out by stage, as MuJoCo's engine is: [`arena`] (every constant, the presets), [`geometry`]
+//! (signed distances), [`ball`] (flight), [`contact`] (contact laws), [`world`] (the stepper),
+//! [`events`] and [`rules`] (the referee), [`predict`] (drag-free prediction, the return sampler)
+//! and [`serve`] (serve generators on a portable ChaCha RNG).
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod arena;
+pub mod ball;
+pub mod contact;
+pub mod events;
+pub mod geometry;
+pub mod predict;
+pub mod rng;
+pub mod rules;
+pub mod serve;
+pub mod world;
+
+pub use arena::{Preset, Side};
+pub use ball::BallState;
+pub use events::{ContactEvent, ContactKind};
+pub use world::{BallWorld, Paddle};
+
+/// Version of the simulator's physics, recorded with every match so it can be re-simulated.
+/// Bump it whenever a change alters any trajectory.
+pub const SIM_VERSION: &str = "0.1.0";
