@@ -1,1 +1,187 @@
-//! placeholder
+//! Serve generators (DESIGN §4): MyoChallenge's P0, P1 and P2 launcher serves to side A, and the
+//! paper's heuristic rally serve from either hitting plane. Seeded by the caller's [`Rng`]; the order
+//! of draws is part of the contract (changing it changes every seeded match: bump `SIM_VERSION`).
+
+use nalgebra::Vector3;
+
+use crate::arena::{self, Side};
+use crate::ball::BallState;
+use crate::predict::{self, BounceModel, PlaneCrossing};
+use crate::rng::Rng;
+
+type V3 = Vector3<f64>;
+
+/// Which serve to generate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServeKind {
+    /// MyoChallenge P0: one fixed serve.
+    P0,
+    /// MyoChallenge P1: position jittered in a small box, fixed velocity.
+    P1,
+    /// MyoChallenge P2: position in a large box, velocity aimed at a random point of A's half.
+    P2,
+    /// The paper's rally serve from `server`'s hitting plane (§IV-C).
+    Rally {
+        /// Who serves.
+        server: Side,
+    },
+}
+
+impl ServeKind {
+    /// Parses "p0", "p1", "p2" or "rally" (served by B, as the launcher serves are; the rally server
+    /// alternates through [`ServeKind::Rally`]).
+    pub fn parse(name: &str) -> Option<ServeKind> {
+        match name {
+            "p0" => Some(ServeKind::P0),
+            "p1" => Some(ServeKind::P1),
+            "p2" => Some(ServeKind::P2),
+            "rally" => Some(ServeKind::Rally { server: Side::B }),
+            _ => None,
+        }
+    }
+}
+
+/// A served ball and who plays it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Serve {
+    /// The ball at t = 0 (no spin).
+    pub ball: BallState,
+    /// The side the ball comes from.
+    pub server: Side,
+    /// The side that must return it.
+    pub receiver: Side,
+    /// For a rally serve: its predicted crossing of the receiver's hitting plane.
+    pub predicted_crossing: Option<PlaneCrossing>,
+}
+
+/// MyoChallenge P0 position, m.
+pub const P0_POS: [f64; 3] = [-1.25, -0.5, 1.2];
+/// MyoChallenge P0 and P1 velocity, m/s.
+pub const P0_VEL: [f64; 3] = [5.6, 1.6, 0.1];
+/// MyoChallenge P1 position box (x, y, z ranges), m.
+pub const P1_POS: [(f64, f64); 3] = [(-1.25, -1.20), (-0.5, -0.45), (1.4, 1.5)];
+/// MyoChallenge P2 position box, m.
+pub const P2_POS: [(f64, f64); 3] = [(-1.25, -0.8), (-0.5, 0.5), (1.4, 1.5)];
+/// MyoChallenge P2 vertical speed range, m/s.
+pub const P2_VZ: (f64, f64) = (-0.1, 0.1);
+/// MyoChallenge P2 aim box on A's half (x, y), m, reached by the ball centre at [`P2_AIM_Z`].
+pub const P2_AIM: [(f64, f64); 2] = [(0.5, 1.35), (-0.60, 0.70)];
+/// Height of the P2 aim point, m (MyoSuite's sampling formula; the real bounce happens earlier).
+pub const P2_AIM_Z: f64 = 0.785;
+/// Most start points a rally serve tries before it settles for the last sampled one.
+pub const RALLY_SERVE_MAX_POINTS: usize = 100;
+
+fn uniform3(rng: &mut Rng, b: &[(f64, f64); 3]) -> V3 {
+    V3::new(rng.uniform(b[0].0, b[0].1), rng.uniform(b[1].0, b[1].1), rng.uniform(b[2].0, b[2].1))
+}
+
+/// Continuous-time fall time used by MyoSuite's P2 formula: from `z0` with `vz` down to `z`.
+fn p2_flight_time(z0: f64, vz: f64, z: f64) -> f64 {
+    let g = arena::GRAVITY;
+    (vz + (vz * vz + 2.0 * g * (z0 - z)).sqrt()) / g
+}
+
+/// Generates a serve. Draw order: P1 and P2 draw position x, y, z; P2 then v_z, then aim x, y; a rally
+/// serve draws (y_r, z) on the server's plane, then the return sampler's draws.
+pub fn generate(kind: ServeKind, rng: &mut Rng, model: &BounceModel) -> Serve {
+    let launcher = |pos: V3, vel: V3| Serve {
+        ball: BallState::new(pos, vel),
+        server: Side::B,
+        receiver: Side::A,
+        predicted_crossing: None,
+    };
+    match kind {
+        ServeKind::P0 => launcher(V3::from(P0_POS), V3::from(P0_VEL)),
+        ServeKind::P1 => launcher(uniform3(rng, &P1_POS), V3::from(P0_VEL)),
+        ServeKind::P2 => {
+            let pos = uniform3(rng, &P2_POS);
+            let vz = rng.uniform(P2_VZ.0, P2_VZ.1);
+            let aim_x = rng.uniform(P2_AIM[0].0, P2_AIM[0].1);
+            let aim_y = rng.uniform(P2_AIM[1].0, P2_AIM[1].1);
+            let t = p2_flight_time(pos.z, vz, P2_AIM_Z);
+            launcher(pos, V3::new((aim_x - pos.x) / t, (aim_y - pos.y) / t, vz))
+        }
+        ServeKind::Rally { server } => rally_serve(server, rng, model),
+    }
+}
+
+/// The paper's heuristic server (§IV-C): a start point uniform in the serve box on the server's
+/// hitting plane and an outgoing velocity from the return sampler, redrawn until the ball bounces on
+/// the receiver's half and crosses the receiver's plane inside the serve box.
+fn rally_serve(server: Side, rng: &mut Rng, model: &BounceModel) -> Serve {
+    let mut last = None;
+    for _ in 0..RALLY_SERVE_MAX_POINTS {
+        let y_r = rng.uniform(-arena::SERVE_BOX_HALF_WIDTH, arena::SERVE_BOX_HALF_WIDTH);
+        let z = rng.uniform(arena::SERVE_BOX_Z.0, arena::SERVE_BOX_Z.1);
+        let pos = V3::new(server.strike_plane_x(), server.world_y(y_r), z);
+        let r = predict::sample_return(rng, &pos, server, model);
+        let serve = Serve {
+            ball: BallState::new(pos, r.v_out),
+            server,
+            receiver: server.other(),
+            predicted_crossing: r.crossing,
+        };
+        if r.accepted {
+            return serve;
+        }
+        last = Some(serve);
+    }
+    last.expect("at least one start point")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::predict::MYOCHALLENGE_BOUNCE;
+
+    #[test]
+    fn p0_is_fixed_and_p1_stays_in_its_box() {
+        let mut rng = Rng::seeded(0);
+        let s = generate(ServeKind::P0, &mut rng, &MYOCHALLENGE_BOUNCE);
+        assert_eq!(s.ball.pos, V3::from(P0_POS));
+        for _ in 0..1000 {
+            let s = generate(ServeKind::P1, &mut rng, &MYOCHALLENGE_BOUNCE);
+            for (i, (lo, hi)) in P1_POS.iter().enumerate() {
+                assert!(s.ball.pos[i] >= *lo && s.ball.pos[i] < *hi);
+            }
+            assert_eq!(s.ball.vel, V3::from(P0_VEL));
+        }
+    }
+
+    #[test]
+    fn p2_aims_at_its_box_by_myosuites_formula() {
+        let mut rng = Rng::seeded(5);
+        for _ in 0..1000 {
+            let s = generate(ServeKind::P2, &mut rng, &MYOCHALLENGE_BOUNCE);
+            let t = p2_flight_time(s.ball.pos.z, s.ball.vel.z, P2_AIM_Z);
+            // Continuous-time aim point, as the formula intends.
+            let aim = s.ball.pos + s.ball.vel * t;
+            assert!(aim.x >= P2_AIM[0].0 - 1e-9 && aim.x <= P2_AIM[0].1 + 1e-9);
+            assert!(aim.y >= P2_AIM[1].0 - 1e-9 && aim.y <= P2_AIM[1].1 + 1e-9);
+            assert!(s.ball.vel.z >= P2_VZ.0 && s.ball.vel.z < P2_VZ.1);
+        }
+    }
+
+    #[test]
+    fn rally_serves_start_in_the_box_and_are_predicted_into_the_other_box() {
+        let mut rng = Rng::seeded(11);
+        for i in 0..200 {
+            let server = if i % 2 == 0 { Side::A } else { Side::B };
+            let s = generate(ServeKind::Rally { server }, &mut rng, &MYOCHALLENGE_BOUNCE);
+            assert_eq!(s.receiver, server.other());
+            assert!((s.ball.pos.x - server.strike_plane_x()).abs() < 1e-12);
+            let (y_r, z) = server.receiver_frame(&s.ball.pos);
+            assert!(arena::in_serve_box(y_r, z) || (y_r.abs() <= 0.7 && (1.1..=1.35).contains(&z)));
+            assert!(predict::return_is_in_box(server, &s.predicted_crossing), "serve {i} not in box");
+        }
+    }
+
+    #[test]
+    fn same_seed_same_serves() {
+        for kind in [ServeKind::P1, ServeKind::P2, ServeKind::Rally { server: Side::A }] {
+            let a = generate(kind, &mut Rng::seeded(42), &MYOCHALLENGE_BOUNCE);
+            let b = generate(kind, &mut Rng::seeded(42), &MYOCHALLENGE_BOUNCE);
+            assert_eq!(a, b);
+        }
+    }
+}
