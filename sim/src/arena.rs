@@ -65,7 +65,11 @@ pub const HANDLE_RADIUS: f64 = 0.016;
 /// Handle half-length, m. The handle's axis is the paddle frame's x; it ends where the blade begins.
 pub const HANDLE_HALF_LENGTH: f64 = 0.051;
 /// Handle centre in the paddle frame, m: just beyond the blade's rim on +x.
-pub const HANDLE_OFFSET: [f64; 3] = [BLADE_OFFSET[0] + BLADE_RADIUS + HANDLE_HALF_LENGTH, 0.0, 0.0];
+pub const HANDLE_OFFSET: [f64; 3] = [
+    BLADE_OFFSET[0] + BLADE_RADIUS + HANDLE_HALF_LENGTH,
+    0.0,
+    0.0,
+];
 
 /// Virtual hitting plane of side A (it receives there), m (paper §IV-B, official `hit_plane_x`).
 pub const STRIKE_PLANE_X: f64 = 1.8;
@@ -256,7 +260,12 @@ pub const REALISTIC: Preset = Preset {
         friction: 0.3,
     },
     air: Some(AirModel {
-        drag: 0.5 * AIR_DENSITY * BALL_DRAG_COEFF * std::f64::consts::PI * BALL_RADIUS * BALL_RADIUS
+        drag: 0.5
+            * AIR_DENSITY
+            * BALL_DRAG_COEFF
+            * std::f64::consts::PI
+            * BALL_RADIUS
+            * BALL_RADIUS
             / BALL_MASS,
         magnus: 0.5
             * AIR_DENSITY

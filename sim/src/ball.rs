@@ -43,7 +43,11 @@ impl BallState {
 
     /// Whether every component is a finite number.
     pub fn is_finite(&self) -> bool {
-        self.pos.iter().chain(self.vel.iter()).chain(self.spin.iter()).all(|x| x.is_finite())
+        self.pos
+            .iter()
+            .chain(self.vel.iter())
+            .chain(self.spin.iter())
+            .all(|x| x.is_finite())
     }
 }
 

@@ -46,7 +46,14 @@ impl SoftContact {
     /// else no force. Tangential: the contact point's sliding velocity is damped at
     /// `tangential_damping`, applied as a friction impulse at the contact point (so it spins the
     /// ball) that never reverses the slip.
-    pub fn acceleration(&self, ball: &BallState, normal: &V3, gap: f64, free: &V3, h: f64) -> Accel {
+    pub fn acceleration(
+        &self,
+        ball: &BallState,
+        normal: &V3,
+        gap: f64,
+        free: &V3,
+        h: f64,
+    ) -> Accel {
         let depth = -gap;
         if depth <= 0.0 {
             return Accel::default();
@@ -75,7 +82,8 @@ impl SoftContact {
         if slip > 1e-12 && self.tangential_damping > 0.0 {
             let dir = v_t / slip;
             // Impulse over the step, capped at the one that stops the slip.
-            let j = (self.tangential_damping * arena::BALL_MASS * slip * h).min(slip * sliding_mass());
+            let j =
+                (self.tangential_damping * arena::BALL_MASS * slip * h).min(slip * sliding_mass());
             let impulse = -j * dir;
             accel.lin += impulse / (arena::BALL_MASS * h);
             accel.ang += r_c.cross(&impulse) / (arena::BALL_INERTIA * h);

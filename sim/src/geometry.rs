@@ -72,16 +72,17 @@ impl Aabb {
         let q = d.abs() - self.half;
         if q.x <= 0.0 && q.y <= 0.0 && q.z <= 0.0 {
             // Inside: the nearest face is the one of least penetration.
-            let (axis, depth) = [q.x, q.y, q.z]
-                .iter()
-                .enumerate()
-                .fold((0, f64::NEG_INFINITY), |best, (i, &v)| {
-                    if v > best.1 {
-                        (i, v)
-                    } else {
-                        best
-                    }
-                });
+            let (axis, depth) =
+                [q.x, q.y, q.z]
+                    .iter()
+                    .enumerate()
+                    .fold((0, f64::NEG_INFINITY), |best, (i, &v)| {
+                        if v > best.1 {
+                            (i, v)
+                        } else {
+                            best
+                        }
+                    });
             let mut normal = V3::zeros();
             normal[axis] = if d[axis] >= 0.0 { 1.0 } else { -1.0 };
             let mut point = *p;
@@ -193,7 +194,8 @@ impl Cylinder {
                 feature: Feature::Top,
             }
         } else {
-            let point_local = radial_dir * self.radius + axis_dir * along.abs().min(self.half_length);
+            let point_local =
+                radial_dir * self.radius + axis_dir * along.abs().min(self.half_length);
             Proximity {
                 distance: dr,
                 normal: radial_dir,
@@ -205,7 +207,8 @@ impl Cylinder {
 
     /// Radius of a sphere about the body origin that holds the whole cylinder, m.
     pub fn bounding_radius(&self) -> f64 {
-        self.center.norm() + (self.radius * self.radius + self.half_length * self.half_length).sqrt()
+        self.center.norm()
+            + (self.radius * self.radius + self.half_length * self.half_length).sqrt()
     }
 }
 
@@ -255,7 +258,9 @@ impl PaddleShape {
 
     /// Radius of a sphere about the paddle origin that holds blade and handle, m.
     pub fn bounding_radius(&self) -> f64 {
-        self.blade.bounding_radius().max(self.handle.bounding_radius())
+        self.blade
+            .bounding_radius()
+            .max(self.handle.bounding_radius())
     }
 }
 

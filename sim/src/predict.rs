@@ -65,7 +65,11 @@ pub fn flight(pos: &V3, vel: &V3, t: f64) -> (V3, V3) {
     let g = arena::GRAVITY;
     let h = arena::TIMESTEP;
     (
-        V3::new(pos.x + vel.x * t, pos.y + vel.y * t, pos.z + vel.z * t - 0.5 * g * t * (t + h)),
+        V3::new(
+            pos.x + vel.x * t,
+            pos.y + vel.y * t,
+            pos.z + vel.z * t - 0.5 * g * t * (t + h),
+        ),
         V3::new(vel.x, vel.y, vel.z - g * t),
     )
 }
@@ -134,14 +138,23 @@ pub struct PlaneCrossing {
 
 /// Follows the drag-free flight with table bounces until the ball reaches `x = plane_x`. `None` if
 /// it never gets there: it flies away from the plane, or falls below `BALL_LOW_Z` first.
-pub fn plane_crossing(pos: &V3, vel: &V3, plane_x: f64, model: &BounceModel) -> Option<PlaneCrossing> {
+pub fn plane_crossing(
+    pos: &V3,
+    vel: &V3,
+    plane_x: f64,
+    model: &BounceModel,
+) -> Option<PlaneCrossing> {
     let mut p = *pos;
     let mut v = *vel;
     let mut t0 = 0.0;
     let mut bounces = 0;
     let mut first_bounce = None;
     for _ in 0..8 {
-        let t_plane = if v.x.abs() > 1e-12 { (plane_x - p.x) / v.x } else { f64::INFINITY };
+        let t_plane = if v.x.abs() > 1e-12 {
+            (plane_x - p.x) / v.x
+        } else {
+            f64::INFINITY
+        };
         if t_plane < 0.0 {
             return None;
         }
@@ -213,7 +226,9 @@ pub struct SampledReturn {
 pub fn return_is_in_box(hitter: Side, crossing: &Option<PlaneCrossing>) -> bool {
     let receiver = hitter.other();
     let Some(c) = crossing else { return false };
-    let Some(b) = c.first_bounce else { return false };
+    let Some(b) = c.first_bounce else {
+        return false;
+    };
     let (y_r, z) = receiver.receiver_frame(&c.pos);
     c.bounces == 1 && Side::of_x(b.pos.x) == receiver && arena::in_serve_box(y_r, z)
 }
@@ -248,7 +263,12 @@ fn draw_return(rng: &mut Rng, strike: &V3, hitter: Side, model: &BounceModel) ->
 /// by `hitter` until the predicted return bounces on the other half and crosses the other hitting
 /// plane inside the serve box, at most [`RETURN_MAX_ATTEMPTS`] times. If none qualifies, the last draw
 /// is returned with `accepted = false`.
-pub fn sample_return(rng: &mut Rng, strike: &V3, hitter: Side, model: &BounceModel) -> SampledReturn {
+pub fn sample_return(
+    rng: &mut Rng,
+    strike: &V3,
+    hitter: Side,
+    model: &BounceModel,
+) -> SampledReturn {
     let plane = hitter.other().strike_plane_x();
     let mut last = None;
     for attempt in 1..=RETURN_MAX_ATTEMPTS {
@@ -296,11 +316,23 @@ mod tests {
     #[test]
     fn crossing_after_one_bounce_and_none_when_flying_away() {
         let model = MYOCHALLENGE_BOUNCE;
-        let c = plane_crossing(&V3::new(-1.2, -0.4, 1.4), &V3::new(5.6, 1.6, 0.1), 1.8, &model).unwrap();
+        let c = plane_crossing(
+            &V3::new(-1.2, -0.4, 1.4),
+            &V3::new(5.6, 1.6, 0.1),
+            1.8,
+            &model,
+        )
+        .unwrap();
         assert_eq!(c.bounces, 1);
         assert!((c.pos.x - 1.8).abs() < 1e-9);
         assert!(c.first_bounce.unwrap().pos.x > 0.0);
-        assert!(plane_crossing(&V3::new(0.5, 0.0, 1.2), &V3::new(-3.0, 0.0, 0.0), 1.8, &model).is_none());
+        assert!(plane_crossing(
+            &V3::new(0.5, 0.0, 1.2),
+            &V3::new(-3.0, 0.0, 0.0),
+            1.8,
+            &model
+        )
+        .is_none());
     }
 
     #[test]
@@ -312,7 +344,10 @@ mod tests {
             let hitter = if i % 2 == 0 { Side::A } else { Side::B };
             let strike = V3::new(hitter.strike_plane_x(), hitter.world_y(0.1), 1.2);
             let r = sample_return(&mut rng, &strike, hitter, &model);
-            assert!(r.v_out.x * hitter.sign() < 0.0, "a return flies towards the other side");
+            assert!(
+                r.v_out.x * hitter.sign() < 0.0,
+                "a return flies towards the other side"
+            );
             assert!(r.v_out.z >= RETURN_VZ.0 && r.v_out.z < RETURN_VZ.1);
             if r.accepted {
                 accepted += 1;
@@ -325,6 +360,9 @@ mod tests {
                 assert!(p_net.z >= NET_CLEARANCE_Z - 1e-9);
             }
         }
-        assert!(accepted >= 190, "only {accepted} of 200 strike points found a return");
+        assert!(
+            accepted >= 190,
+            "only {accepted} of 200 strike points found a return"
+        );
     }
 }

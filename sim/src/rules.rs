@@ -123,7 +123,11 @@ pub enum Call {
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
     /// The ball left `hitter` (its paddle, or the serve) and must land on the other half.
-    Outgoing { hitter: Side, serve: bool, net: bool },
+    Outgoing {
+        hitter: Side,
+        serve: bool,
+        net: bool,
+    },
     /// The ball bounced once on `receiver`'s half; `receiver` must touch it once.
     Incoming { receiver: Side },
     /// The rally is over.
@@ -198,7 +202,9 @@ impl Referee {
         match self.phase {
             Phase::Over(_) => None,
             Phase::Outgoing { hitter, serve, net } => match e.kind {
-                ContactKind::Paddle { owner } if owner == hitter => self.fail(hitter, Failure::DoubleTouch, e.t),
+                ContactKind::Paddle { owner } if owner == hitter => {
+                    self.fail(hitter, Failure::DoubleTouch, e.t)
+                }
                 ContactKind::Paddle { owner } => self.fail(owner, Failure::NoBounce, e.t),
                 ContactKind::Net => {
                     self.phase = Phase::Outgoing {
@@ -232,13 +238,18 @@ impl Referee {
                         serve: false,
                         net: false,
                     };
-                    Some(Call::Hit { side: owner, t: e.t })
+                    Some(Call::Hit {
+                        side: owner,
+                        t: e.t,
+                    })
                 }
                 // The side that sent the ball touched it again before the receiver returned it.
                 ContactKind::Paddle { owner } => self.fail(owner, Failure::DoubleTouch, e.t),
                 ContactKind::Net => None,
                 ContactKind::Table { .. } if !e.is_bounce() => None,
-                ContactKind::Table { .. } | ContactKind::Floor => self.fail(receiver, Failure::Miss, e.t),
+                ContactKind::Table { .. } | ContactKind::Floor => {
+                    self.fail(receiver, Failure::Miss, e.t)
+                }
             },
         }
     }

@@ -72,7 +72,11 @@ pub const P2_AIM_Z: f64 = 0.785;
 pub const RALLY_SERVE_MAX_POINTS: usize = 100;
 
 fn uniform3(rng: &mut Rng, b: &[(f64, f64); 3]) -> V3 {
-    V3::new(rng.uniform(b[0].0, b[0].1), rng.uniform(b[1].0, b[1].1), rng.uniform(b[2].0, b[2].1))
+    V3::new(
+        rng.uniform(b[0].0, b[0].1),
+        rng.uniform(b[1].0, b[1].1),
+        rng.uniform(b[2].0, b[2].1),
+    )
 }
 
 /// Continuous-time fall time used by MyoSuite's P2 formula: from `z0` with `vz` down to `z`.
@@ -172,13 +176,20 @@ mod tests {
             assert!((s.ball.pos.x - server.strike_plane_x()).abs() < 1e-12);
             let (y_r, z) = server.receiver_frame(&s.ball.pos);
             assert!(arena::in_serve_box(y_r, z) || (y_r.abs() <= 0.7 && (1.1..=1.35).contains(&z)));
-            assert!(predict::return_is_in_box(server, &s.predicted_crossing), "serve {i} not in box");
+            assert!(
+                predict::return_is_in_box(server, &s.predicted_crossing),
+                "serve {i} not in box"
+            );
         }
     }
 
     #[test]
     fn same_seed_same_serves() {
-        for kind in [ServeKind::P1, ServeKind::P2, ServeKind::Rally { server: Side::A }] {
+        for kind in [
+            ServeKind::P1,
+            ServeKind::P2,
+            ServeKind::Rally { server: Side::A },
+        ] {
             let a = generate(kind, &mut Rng::seeded(42), &MYOCHALLENGE_BOUNCE);
             let b = generate(kind, &mut Rng::seeded(42), &MYOCHALLENGE_BOUNCE);
             assert_eq!(a, b);

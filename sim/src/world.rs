@@ -133,7 +133,8 @@ impl BallWorld {
     /// One physics step of `TIMESTEP`, with the paddles at their poses at the step's start.
     pub fn physics_step(&mut self, paddles: &[Paddle], events: &mut Vec<ContactEvent>) {
         let h = arena::TIMESTEP;
-        let free = ball::flight_acceleration(self.preset.air.as_ref(), &self.ball.vel, &self.ball.spin);
+        let free =
+            ball::flight_acceleration(self.preset.air.as_ref(), &self.ball.vel, &self.ball.spin);
         let soft = self.soft_law();
         let start = self.ball.pos;
         let mut accel = Accel {
@@ -142,9 +143,12 @@ impl BallWorld {
         };
         let mut start_gaps = [f64::INFINITY; 2];
         if let Some(law) = &soft {
-            for (i, prox) in [self.table.proximity(&start), plane_proximity(arena::FLOOR_Z, &start)]
-                .iter()
-                .enumerate()
+            for (i, prox) in [
+                self.table.proximity(&start),
+                plane_proximity(arena::FLOOR_Z, &start),
+            ]
+            .iter()
+            .enumerate()
             {
                 let gap = prox.distance - arena::BALL_RADIUS;
                 start_gaps[i] = gap;
@@ -198,7 +202,13 @@ impl BallWorld {
     }
 
     /// Moves the ball through the step at its new velocity, resolving every impact on the way.
-    fn sweep(&mut self, paddles: &[Paddle], h: f64, touched: &mut Touching, events: &mut Vec<ContactEvent>) {
+    fn sweep(
+        &mut self,
+        paddles: &[Paddle],
+        h: f64,
+        touched: &mut Touching,
+        events: &mut Vec<ContactEvent>,
+    ) {
         let mut tau = 0.0;
         let mut hit_already: Vec<Target> = Vec::new();
         for _ in 0..MAX_IMPACTS_PER_STEP {
@@ -223,9 +233,12 @@ impl BallWorld {
                 self.ball.pos += prox.normal * (-gap + TOUCH_EPS);
             }
             let coeffs = self.coeffs(target);
-            if contact::apply_impulse(&mut self.ball, &prox.normal, &surface_vel, &coeffs).is_some() {
+            if contact::apply_impulse(&mut self.ball, &prox.normal, &surface_vel, &coeffs).is_some()
+            {
                 let kind = match target {
-                    Target::Table => ContactKind::Table { feature: prox.feature },
+                    Target::Table => ContactKind::Table {
+                        feature: prox.feature,
+                    },
                     Target::Floor => ContactKind::Floor,
                     Target::Net => ContactKind::Net,
                     Target::Paddle(i) => ContactKind::Paddle {
@@ -247,7 +260,12 @@ impl BallWorld {
         self.ball.pos += self.ball.vel * (h - tau);
     }
 
-    fn touch_flags<'a>(&self, target: Target, paddles: &[Paddle], touched: &'a mut Touching) -> (bool, &'a mut bool) {
+    fn touch_flags<'a>(
+        &self,
+        target: Target,
+        paddles: &[Paddle],
+        touched: &'a mut Touching,
+    ) -> (bool, &'a mut bool) {
         match target {
             Target::Table => (self.touching.table, &mut touched.table),
             Target::Floor => (self.touching.floor, &mut touched.floor),
@@ -266,7 +284,10 @@ impl BallWorld {
         } else {
             &[Target::Net]
         };
-        surfaces.iter().copied().chain((0..paddles.len()).map(Target::Paddle))
+        surfaces
+            .iter()
+            .copied()
+            .chain((0..paddles.len()).map(Target::Paddle))
     }
 
     fn coeffs(&self, target: Target) -> ImpulseCoeffs {

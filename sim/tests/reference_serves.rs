@@ -88,7 +88,11 @@ fn thirty_reference_serves_bounce_like_mujoco() {
         );
         worst_path = worst_path.max(c.max_path_error);
         worst_vel = worst_vel.max(c.max_vel_error_after);
-        assert!(c.bounce_time_error <= 0.0100 + 1e-9, "serve {id}: bounce time off by {}", c.bounce_time_error);
+        assert!(
+            c.bounce_time_error <= 0.0100 + 1e-9,
+            "serve {id}: bounce time off by {}",
+            c.bounce_time_error
+        );
     }
     eprintln!("worst path error {worst_path:.4} m, worst velocity error {worst_vel:.4}");
     assert!(worst_path < 0.02, "path error {worst_path} m exceeds 2 cm");
@@ -106,7 +110,11 @@ fn substeps_follow_mujoco_through_the_bounce() {
         let f: Vec<&str> = line.split(',').collect();
         let num = |i: usize| f[i].parse::<f64>().expect("number");
         let id: usize = f[0].parse().expect("serve id");
-        by_serve[id].push((num(1), Vector3::new(num(2), num(3), num(4)), !f[11].is_empty()));
+        by_serve[id].push((
+            num(1),
+            Vector3::new(num(2), num(3), num(4)),
+            !f[11].is_empty(),
+        ));
     }
     let mut worst: f64 = 0.0;
     for (id, rows) in by_serve.iter().enumerate() {
@@ -120,7 +128,10 @@ fn substeps_follow_mujoco_through_the_bounce() {
         }
         let first = rows.iter().position(|r| r.2).expect("a contact");
         let (t_mj, _, _) = rows[first];
-        let ours = events.iter().find(|e| matches!(e.kind, ContactKind::Table { .. })).expect("bounce");
+        let ours = events
+            .iter()
+            .find(|e| matches!(e.kind, ContactKind::Table { .. }))
+            .expect("bounce");
         assert!(
             ours.t > t_mj - 2.0 * sim::arena::TIMESTEP - 1e-9 && ours.t <= t_mj + 1e-9,
             "serve {id}: our contact began at {}, MuJoCo saw it first at {t_mj}",
