@@ -1,1 +1,45 @@
-fn main() {}
+//! `rally`: the one binary of muscle-rally, a thin clap front over the crates (DESIGN §2).
+//!
+//! Each subcommand lives in `cmd/` and does its I/O there; the physics stays in `sim`.
+#![forbid(unsafe_code)]
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// Self-play tournament server for musculoskeletal table-tennis robots (Diff-Muscle).
+#[derive(Parser)]
+#[command(name = "rally", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a free ball (a serve, or a state you give) and print its flight as JSON lines.
+    Ball(Box<cmd::ball::BallArgs>),
+    /// Measure simulator speed against MuJoCo on the same work.
+    Bench(cmd::bench::BenchArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Ball(args) => cmd::ball::run(&args),
+        Command::Bench(args) => cmd::bench::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(cmd::CliError::Usage(msg)) => {
+            eprintln!("error: {msg}");
+            ExitCode::from(2)
+        }
+        Err(cmd::CliError::Failed(err)) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,73 @@
+//! The subcommands of `rally`, and what they share: argument parsers and the error type that picks
+//! the exit code (2 for bad arguments, 1 for anything that failed while running).
+
+pub mod ball;
+pub mod bench;
+
+use nalgebra::Vector3;
+
+/// Why a command stopped.
+#[derive(Debug)]
+pub enum CliError {
+    /// The arguments were wrong: exit 2 with this message.
+    Usage(String),
+    /// Something failed while running: exit 1.
+    Failed(anyhow::Error),
+}
+
+impl From<anyhow::Error> for CliError {
+    fn from(e: anyhow::Error) -> Self {
+        CliError::Failed(e)
+    }
+}
+
+impl From<std::io::Error> for CliError {
+    fn from(e: std::io::Error) -> Self {
+        CliError::Failed(e.into())
+    }
+}
+
+/// Parses "X,Y,Z" into a vector of three finite numbers (clap value parser).
+pub fn parse_vec3(s: &str) -> Result<Vector3<f64>, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!(
+            "expected 3 comma-separated numbers, got {}",
+            parts.len()
+        ));
+    }
+    let mut v = [0.0; 3];
+    for (i, p) in parts.iter().enumerate() {
+        let x: f64 = p.parse().map_err(|_| format!("'{p}' is not a number"))?;
+        if !x.is_finite() {
+            return Err(format!("'{p}' is not a finite number"));
+        }
+        v[i] = x;
+    }
+    Ok(Vector3::from(v))
+}
+
+/// Parses a positive, finite number of seconds no larger than an hour (clap value parser).
+pub fn parse_seconds(s: &str) -> Result<f64, String> {
+    let x: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number"))?;
+    if !x.is_finite() || x <= 0.0 {
+        return Err("must be a positive number of seconds".into());
+    }
+    if x > 3600.0 {
+        return Err("must be at most 3600 seconds".into());
+    }
+    Ok(x)
+}
+
+/// Parses a preset name (clap value parser).
+pub fn parse_preset(s: &str) -> Result<sim::Preset, String> {
+    sim::Preset::by_name(s).ok_or_else(|| {
+        format!(
+            "unknown preset; expected one of: {}",
+            sim::Preset::names().join(", ")
+        )
+    })
+}
