@@ -138,6 +138,34 @@ mod tests {
     use super::*;
     use crate::predict::MYOCHALLENGE_BOUNCE;
 
+    /// P1, P2 and rally serve (by A) for seed 0: position then velocity, as f64 bits.
+    const PINNED: [[u64; 6]; 3] = [
+        [
+            13831520685972801208,
+            13825631191048445258,
+            4609298724775684458,
+            4617991057905706598,
+            4609884578576439706,
+            4591870180066957722,
+        ],
+        [
+            13829932202869455085,
+            13808444055292104320,
+            4609298724775684458,
+            4618408219223871511,
+            4601002856270307995,
+            13814375059036522316,
+        ],
+        [
+            4610785298501913805,
+            4599665110851126613,
+            4608157359986476285,
+            13842087512940187656,
+            4594764360310771632,
+            4604839003596996420,
+        ],
+    ];
+
     #[test]
     fn p0_is_fixed_and_p1_stays_in_its_box() {
         let mut rng = Rng::seeded(0);
@@ -181,6 +209,31 @@ mod tests {
                 "serve {i} not in box"
             );
         }
+    }
+
+    /// The exact bits of seeded serves, so that a change of RNG crate, draw order or formula (which
+    /// would silently change every recorded match) fails here: bump `SIM_VERSION` and these together.
+    #[test]
+    fn seeded_serves_are_pinned_to_the_bit() {
+        let bits = |s: &Serve| -> [u64; 6] {
+            let v: Vec<f64> = s
+                .ball
+                .pos
+                .iter()
+                .chain(s.ball.vel.iter())
+                .copied()
+                .collect();
+            std::array::from_fn(|i| v[i].to_bits())
+        };
+        let p1 = generate(ServeKind::P1, &mut Rng::seeded(0), &MYOCHALLENGE_BOUNCE);
+        let p2 = generate(ServeKind::P2, &mut Rng::seeded(0), &MYOCHALLENGE_BOUNCE);
+        let rally = generate(
+            ServeKind::Rally { server: Side::A },
+            &mut Rng::seeded(0),
+            &MYOCHALLENGE_BOUNCE,
+        );
+        let got = [bits(&p1), bits(&p2), bits(&rally)];
+        assert_eq!(got, PINNED, "seeded serves changed: {got:?}");
     }
 
     #[test]

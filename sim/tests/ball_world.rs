@@ -353,3 +353,45 @@ fn paddle_and_net_impacts_never_add_energy_in_the_paddle_frame() {
         }
     }
 }
+
+#[test]
+fn net_impacts_never_add_energy() {
+    let mut rng = Rng::seeded(78);
+    for preset in [MYOCHALLENGE, REALISTIC] {
+        for i in 0..300 {
+            let from_a = i % 2 == 0;
+            let s = if from_a { 1.0 } else { -1.0 };
+            let target = V3::new(0.0, rng.uniform(-0.5, 0.6), rng.uniform(0.83, 0.96));
+            let dir = V3::new(-s, rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3)).normalize();
+            let start = target - dir * 0.08;
+            let mut ball = BallState::new(start, dir * rng.uniform(1.0, 40.0));
+            ball.spin = V3::new(
+                rng.uniform(-300.0, 300.0),
+                rng.uniform(-300.0, 300.0),
+                rng.uniform(-300.0, 300.0),
+            );
+            let mut world = BallWorld::new(preset, ball);
+            world.preset.air = None;
+            let mut events = Vec::new();
+            let mut e0 = world.ball.mechanical_energy();
+            for _ in 0..60 {
+                world.physics_step(&[], &mut events);
+                let e1 = world.ball.mechanical_energy();
+                // Stop before any table contact: only the net's impulse is under test.
+                if events.iter().any(|e| e.kind != ContactKind::Net) {
+                    break;
+                }
+                assert!(
+                    e1 <= e0 * (1.0 + 1e-12),
+                    "{} case {i}: {e0} -> {e1}",
+                    preset.name
+                );
+                e0 = e1;
+            }
+            assert!(
+                matches!(events.first().map(|e| e.kind), Some(ContactKind::Net)),
+                "case {i}: missed the net"
+            );
+        }
+    }
+}

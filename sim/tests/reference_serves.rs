@@ -141,3 +141,37 @@ fn substeps_follow_mujoco_through_the_bounce() {
     eprintln!("worst substep path error {worst:.4} m");
     assert!(worst < 0.02, "path error {worst} m exceeds 2 cm");
 }
+
+/// The planner's drag-free prediction with the fitted bounce model, started from each serve's state at
+/// t = 0, against where MuJoCo's ball crossed side A's hitting plane (interpolated between rows).
+#[test]
+fn prediction_finds_mujocos_hitting_plane_crossing() {
+    use sim::predict::{plane_crossing, MYOCHALLENGE_BOUNCE};
+    let plane = sim::Side::A.strike_plane_x();
+    let mut sq = 0.0;
+    let mut worst: f64 = 0.0;
+    let serves = load();
+    for (id, rows) in serves.iter().enumerate() {
+        let k = rows
+            .windows(2)
+            .position(|w| w[0].pos.x < plane && w[1].pos.x >= plane)
+            .expect("crosses the plane");
+        let (a, b) = (&rows[k], &rows[k + 1]);
+        let f = (plane - a.pos.x) / (b.pos.x - a.pos.x);
+        let mujoco = a.pos + (b.pos - a.pos) * f;
+        let t_mujoco = a.t + (b.t - a.t) * f;
+        let c = plane_crossing(&rows[0].pos, &rows[0].vel, plane, &MYOCHALLENGE_BOUNCE)
+            .expect("predicted");
+        let err = (c.pos - mujoco).norm();
+        assert!(
+            (c.t - t_mujoco).abs() < 0.01,
+            "serve {id}: crossing time {} vs {t_mujoco}",
+            c.t
+        );
+        sq += err * err;
+        worst = worst.max(err);
+    }
+    let rms = (sq / serves.len() as f64).sqrt();
+    eprintln!("prediction at the hitting plane: rms {rms:.4} m, worst {worst:.4} m");
+    assert!(rms < 0.02 && worst < 0.05, "rms {rms}, worst {worst}");
+}
