@@ -1,0 +1,316 @@
+//! Forward kinematics (MuJoCo's `mj_kinematics`), point Jacobians, and the lengths and moment arms
+//! of spatial tendons (`mj_tendon`): everything that depends on positions only.
+//!
+//! Reads a [`Model`] and a `qpos`; writes a [`Kinematics`] workspace. No allocation after `new`.
+
+use nalgebra::{DMatrix, Matrix3, Quaternion, UnitQuaternion, Vector3};
+
+use crate::model::{JointKind, Model, Transmission};
+
+type V3 = Vector3<f64>;
+
+/// Position-dependent quantities of a configuration (MuJoCo's `xpos`, `xmat`, `xipos`, `xanchor`,
+/// `xaxis`, `site_xpos`), all in the world frame.
+#[derive(Debug, Clone)]
+pub struct Kinematics {
+    /// Body frame origins.
+    pub xpos: Vec<V3>,
+    /// Body frame orientations.
+    pub xquat: Vec<UnitQuaternion<f64>>,
+    /// Body rotation matrices.
+    pub xrot: Vec<Matrix3<f64>>,
+    /// Body centres of mass.
+    pub xipos: Vec<V3>,
+    /// Per degree of freedom: its unit axis (rotation axis, or translation direction).
+    pub dof_axis: Vec<V3>,
+    /// Per degree of freedom: a point on its rotation axis (unused for translations).
+    pub dof_anchor: Vec<V3>,
+    /// Per degree of freedom: whether it rotates (hinge, free rotation) or translates.
+    pub dof_rotates: Vec<bool>,
+    /// Site positions.
+    pub site_pos: Vec<V3>,
+    /// For each body, the last degree of freedom on its path to the root (walk `dof_parent` from it).
+    pub body_last_dof: Vec<Option<usize>>,
+}
+
+impl Kinematics {
+    /// A workspace for `model`, at its reference configuration.
+    pub fn new(model: &Model) -> Kinematics {
+        let nb = model.bodies.len();
+        let mut body_last_dof = vec![None; nb];
+        for b in 1..nb {
+            let body = &model.bodies[b];
+            let own = (body.first_joint..body.first_joint + body.joint_count)
+                .last()
+                .map(|j| model.joints[j].dof_adr + model.joints[j].kind.nv() - 1);
+            body_last_dof[b] = own.or(body_last_dof[body.parent.expect("non-world body")]);
+        }
+        let mut k = Kinematics {
+            xpos: vec![V3::zeros(); nb],
+            xquat: vec![UnitQuaternion::identity(); nb],
+            xrot: vec![Matrix3::identity(); nb],
+            xipos: vec![V3::zeros(); nb],
+            dof_axis: vec![V3::zeros(); model.nv],
+            dof_anchor: vec![V3::zeros(); model.nv],
+            dof_rotates: vec![false; model.nv],
+            site_pos: vec![V3::zeros(); model.sites.len()],
+            body_last_dof,
+        };
+        let mut q = model.qpos0.clone();
+        model.apply_couplings(&mut q);
+        k.update(model, &q);
+        k
+    }
+
+    /// Recomputes every frame for `qpos` (taken as is: apply couplings first if needed).
+    pub fn update(&mut self, model: &Model, qpos: &[f64]) {
+        for b in 1..model.bodies.len() {
+            let body = &model.bodies[b];
+            let p = body.parent.expect("non-world body");
+            let joints = body.first_joint..body.first_joint + body.joint_count;
+            let free = joints
+                .clone()
+                .next()
+                .filter(|&j| model.joints[j].kind == JointKind::Free);
+            let (mut pos, mut quat) = if let Some(j) = free {
+                let a = model.joints[j].qpos_adr;
+                let q = UnitQuaternion::from_quaternion(Quaternion::new(
+                    qpos[a + 3],
+                    qpos[a + 4],
+                    qpos[a + 5],
+                    qpos[a + 6],
+                ));
+                (V3::new(qpos[a], qpos[a + 1], qpos[a + 2]), q)
+            } else {
+                (
+                    self.xpos[p] + self.xrot[p] * body.pos,
+                    self.xquat[p] * body.quat,
+                )
+            };
+            for j in joints {
+                let joint = &model.joints[j];
+                let rot = quat.to_rotation_matrix();
+                match joint.kind {
+                    JointKind::Free => {
+                        let d = joint.dof_adr;
+                        for i in 0..3 {
+                            self.dof_axis[d + i] = V3::ith(i, 1.0);
+                            self.dof_rotates[d + i] = false;
+                            self.dof_axis[d + 3 + i] = rot.matrix().column(i).into();
+                            self.dof_anchor[d + 3 + i] = pos;
+                            self.dof_rotates[d + 3 + i] = true;
+                        }
+                    }
+                    JointKind::Hinge => {
+                        let anchor = pos + rot * joint.pos;
+                        let axis = rot * joint.axis;
+                        self.dof_axis[joint.dof_adr] = axis;
+                        self.dof_anchor[joint.dof_adr] = anchor;
+                        self.dof_rotates[joint.dof_adr] = true;
+                        let angle = qpos[joint.qpos_adr] - joint.reference;
+                        quat *= UnitQuaternion::from_scaled_axis(joint.axis * angle);
+                        pos = anchor - quat * joint.pos;
+                    }
+                    JointKind::Slide => {
+                        let axis = rot * joint.axis;
+                        self.dof_axis[joint.dof_adr] = axis;
+                        self.dof_anchor[joint.dof_adr] = pos + rot * joint.pos;
+                        self.dof_rotates[joint.dof_adr] = false;
+                        pos += axis * (qpos[joint.qpos_adr] - joint.reference);
+                    }
+                }
+            }
+            self.xpos[b] = pos;
+            self.xquat[b] = quat;
+            self.xrot[b] = *quat.to_rotation_matrix().matrix();
+            self.xipos[b] = pos + self.xrot[b] * body.com;
+        }
+        for (i, s) in model.sites.iter().enumerate() {
+            self.site_pos[i] = self.xpos[s.body] + self.xrot[s.body] * s.pos;
+        }
+    }
+
+    /// The chain of degrees of freedom that move `body`, from the body towards the root.
+    pub fn chain<'a>(&self, model: &'a Model, body: usize) -> impl Iterator<Item = usize> + 'a {
+        std::iter::successors(self.body_last_dof[body], move |&d| model.dof_parent[d])
+    }
+
+    /// Velocity of the world point `p` (attached to the body the dof moves) per unit speed of `dof`.
+    pub fn point_velocity(&self, dof: usize, p: &V3) -> V3 {
+        if self.dof_rotates[dof] {
+            self.dof_axis[dof].cross(&(p - self.dof_anchor[dof]))
+        } else {
+            self.dof_axis[dof]
+        }
+    }
+
+    /// Translational Jacobian of the world point `p` fixed to `body`: 3 × nv.
+    pub fn point_jacobian(&self, model: &Model, body: usize, p: &V3) -> DMatrix<f64> {
+        let mut j = DMatrix::zeros(3, model.nv);
+        for d in self.chain(model, body) {
+            j.set_column(d, &self.point_velocity(d, p));
+        }
+        j
+    }
+}
+
+/// Length of every tendon and its moment arms `∂l/∂q` per degree of freedom (MuJoCo's `ten_J`).
+#[derive(Debug, Clone)]
+pub struct TendonKinematics {
+    /// Lengths, m.
+    pub length: Vec<f64>,
+    /// Moment arms, ntendon × nv (row per tendon), m or m/m.
+    pub moment: DMatrix<f64>,
+}
+
+impl TendonKinematics {
+    /// Zeroed storage for `model`.
+    pub fn new(model: &Model) -> TendonKinematics {
+        TendonKinematics {
+            length: vec![0.0; model.tendons.len()],
+            moment: DMatrix::zeros(model.tendons.len(), model.nv),
+        }
+    }
+
+    /// Recomputes lengths and moment arms from the site positions in `kin`.
+    pub fn update(&mut self, model: &Model, kin: &Kinematics) {
+        self.moment.fill(0.0);
+        for (t, tendon) in model.tendons.iter().enumerate() {
+            let mut length = 0.0;
+            for w in tendon.sites.windows(2) {
+                let (s0, s1) = (w[0], w[1]);
+                let (p0, p1) = (kin.site_pos[s0], kin.site_pos[s1]);
+                let seg = p1 - p0;
+                let l = seg.norm();
+                length += l;
+                if l < 1e-12 {
+                    continue;
+                }
+                let u = seg / l;
+                let (b0, b1) = (model.sites[s0].body, model.sites[s1].body);
+                if b0 == b1 {
+                    continue;
+                }
+                for d in kin.chain(model, b1) {
+                    self.moment[(t, d)] += u.dot(&kin.point_velocity(d, &p1));
+                }
+                for d in kin.chain(model, b0) {
+                    self.moment[(t, d)] -= u.dot(&kin.point_velocity(d, &p0));
+                }
+            }
+            self.length[t] = length;
+        }
+    }
+}
+
+/// Actuator length for a transmission, given tendon lengths and `qpos`.
+pub fn actuator_length(
+    model: &Model,
+    trn: Transmission,
+    tendons: &TendonKinematics,
+    qpos: &[f64],
+) -> f64 {
+    match trn {
+        Transmission::Tendon(t) => tendons.length[t],
+        Transmission::Joint(j) => qpos[model.joints[j].qpos_adr],
+    }
+}
+
+/// Number of quasi-random configurations sampled per muscle when its `lengthrange` is not given.
+pub const LENGTHRANGE_SAMPLES: usize = 1024;
+
+/// The k-th element of the van der Corput sequence in `base` (for Halton points).
+fn radical_inverse(mut k: usize, base: usize) -> f64 {
+    let mut f = 1.0;
+    let mut r = 0.0;
+    while k > 0 {
+        f /= base as f64;
+        r += f * (k % base) as f64;
+        k /= base;
+    }
+    r
+}
+
+/// Fills `lengthrange` of every muscle that does not state it: the minimum and maximum tendon length
+/// over the joint ranges, estimated by [`LENGTHRANGE_SAMPLES`] Halton-sequence configurations of the
+/// independent joints (unlimited hinges over ±π; unlimited slides and free joints held at their
+/// reference; couplings applied), each extreme then refined by coordinate search over the joint limits.
+/// MuJoCo estimates it by simulation instead, so the two can differ slightly; shipped models state
+/// `lengthrange` for every muscle.
+pub fn fill_lengthranges(model: &mut Model) {
+    let needed: Vec<usize> = (0..model.actuators.len())
+        .filter(|&a| model.actuators[a].muscle().is_some() && !model.actuators[a].lengthrange_given)
+        .collect();
+    if needed.is_empty() {
+        return;
+    }
+    let free_joints: Vec<(usize, [f64; 2])> = (0..model.joints.len())
+        .filter(|&j| model.joints[j].kind != JointKind::Free && !model.is_dependent(j))
+        .filter_map(|j| {
+            let joint = &model.joints[j];
+            match (joint.range, joint.kind) {
+                (Some(r), _) => Some((j, r)),
+                (None, JointKind::Hinge) => {
+                    Some((j, [-std::f64::consts::PI, std::f64::consts::PI]))
+                }
+                _ => None,
+            }
+        })
+        .collect();
+    const PRIMES: [usize; 24] = [
+        2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71, 73, 79, 83, 89,
+    ];
+    let mut kin = Kinematics::new(model);
+    let mut ten = TendonKinematics::new(model);
+    let mut lengths_at = |q: &[f64], model: &Model| -> Vec<f64> {
+        let mut q = q.to_vec();
+        model.apply_couplings(&mut q);
+        kin.update(model, &q);
+        ten.update(model, &kin);
+        needed
+            .iter()
+            .map(|&a| actuator_length(model, model.actuators[a].transmission, &ten, &q))
+            .collect()
+    };
+    let n = needed.len();
+    let mut lo = vec![(f64::INFINITY, model.qpos0.clone()); n];
+    let mut hi = vec![(f64::NEG_INFINITY, model.qpos0.clone()); n];
+    for k in 1..=LENGTHRANGE_SAMPLES {
+        let mut q = model.qpos0.clone();
+        for (i, (j, r)) in free_joints.iter().enumerate() {
+            // Beyond 24 joints, fall back to a scrambled index so every joint still varies.
+            let u = radical_inverse(k + i * 7919, PRIMES[i % PRIMES.len()]);
+            q[model.joints[*j].qpos_adr] = r[0] + u * (r[1] - r[0]);
+        }
+        let l = lengths_at(&q, model);
+        for i in 0..n {
+            if l[i] < lo[i].0 {
+                lo[i] = (l[i], q.clone());
+            }
+            if l[i] > hi[i].0 {
+                hi[i] = (l[i], q.clone());
+            }
+        }
+    }
+    // Coordinate search from each extreme over the joint limits and midpoints.
+    for i in 0..n {
+        for (best, sign) in [(&mut lo[i], 1.0), (&mut hi[i], -1.0)] {
+            for _ in 0..3 {
+                for (j, r) in &free_joints {
+                    let adr = model.joints[*j].qpos_adr;
+                    for v in [r[0], r[1], 0.5 * (r[0] + r[1])] {
+                        let mut q = best.1.clone();
+                        q[adr] = v;
+                        let l = lengths_at(&q, model)[i];
+                        if sign * l < sign * best.0 {
+                            *best = (l, q);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for (i, &a) in needed.iter().enumerate() {
+        model.actuators[a].lengthrange = [lo[i].0, hi[i].0];
+    }
+}
