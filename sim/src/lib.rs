@@ -17,6 +17,7 @@
 pub mod arena;
 pub mod ball;
 pub mod contact;
+pub mod dynamics;
 pub mod events;
 pub mod geometry;
 pub mod kinematics;

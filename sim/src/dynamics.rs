@@ -1,0 +1,480 @@
+//! Rigid-body dynamics of a musculoskeletal model: the joint-space mass matrix (composite rigid body
+//! algorithm), the bias force (recursive Newton–Euler: Coriolis, centrifugal, gravity), passive joint
+//! forces, actuator and muscle forces, exact joint couplings, soft joint limits, and MuJoCo's Euler
+//! step (semi-implicit, joint damping implicit, armature on the mass matrix diagonal).
+//!
+//! Spatial vectors are 6-vectors `[angular; linear]` expressed in the world frame at the world origin,
+//! as MuJoCo's `cdof`/`cinert` are at a common point. Reads a [`Model`]; writes a [`State`] and the
+//! [`Data`] workspace. No allocation in the step after the workspace is built.
+
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
+
+use crate::kinematics::{Kinematics, TendonKinematics};
+use crate::model::{Bias, Dynamics as ActDynamics, Gain, JointKind, Model, Transmission};
+use crate::muscle;
+
+type V3 = Vector3<f64>;
+type V6 = Vector6<f64>;
+
+/// The mutable state of one robot (MuJoCo's `mjData` state part): small and cheap to clone.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    /// Simulated time, s.
+    pub time: f64,
+    /// Joint positions (`nq`).
+    pub qpos: Vec<f64>,
+    /// Joint velocities (`nv`).
+    pub qvel: Vec<f64>,
+    /// Actuator activations, one per actuator (zero and unused for actuators without dynamics).
+    pub act: Vec<f64>,
+    /// Actuator controls, one per actuator.
+    pub ctrl: Vec<f64>,
+}
+
+impl State {
+    /// The reference configuration at rest, couplings applied.
+    pub fn new(model: &Model) -> State {
+        let mut qpos = model.qpos0.clone();
+        model.apply_couplings(&mut qpos);
+        State {
+            time: 0.0,
+            qpos,
+            qvel: vec![0.0; model.nv],
+            act: vec![0.0; model.actuators.len()],
+            ctrl: vec![0.0; model.actuators.len()],
+        }
+    }
+
+    /// Sets positions (couplings applied) and zero velocities.
+    pub fn set_qpos(&mut self, model: &Model, qpos: &[f64]) {
+        self.qpos.copy_from_slice(qpos);
+        model.apply_couplings(&mut self.qpos);
+        self.qvel.iter_mut().for_each(|v| *v = 0.0);
+    }
+}
+
+/// Soft joint limits: MuJoCo's default `solreflimit = (0.02, 1)` (time constant, damping ratio) and
+/// `solimplimit = (0.9, 0.95, 0.001)`.
+pub const LIMIT_SOLREF: [f64; 2] = [0.02, 1.0];
+/// See [`LIMIT_SOLREF`].
+pub const LIMIT_SOLIMP: [f64; 3] = [0.9, 0.95, 0.001];
+
+/// Everything a step computes (MuJoCo's `mjData` derived part). Build once per model and reuse.
+#[derive(Debug, Clone)]
+pub struct Data {
+    /// Frames, sites.
+    pub kin: Kinematics,
+    /// Tendon lengths and moment arms.
+    pub ten: TendonKinematics,
+    /// Joint-space mass matrix with armature (nv × nv).
+    pub mass: DMatrix<f64>,
+    /// Bias force: Coriolis, centrifugal and gravity (MuJoCo's `qfrc_bias`), nv.
+    pub bias: DVector<f64>,
+    /// Passive joint force: springs and damping (MuJoCo's `qfrc_passive`), nv.
+    pub passive: DVector<f64>,
+    /// Generalised actuator force, nv.
+    pub actuation: DVector<f64>,
+    /// Joint-limit force, nv.
+    pub limit: DVector<f64>,
+    /// Actuator lengths.
+    pub actuator_length: Vec<f64>,
+    /// Actuator velocities.
+    pub actuator_velocity: Vec<f64>,
+    /// Actuator forces (muscles: negative when pulling).
+    pub actuator_force: Vec<f64>,
+    /// Joint accelerations of the last step, nv.
+    pub qacc: DVector<f64>,
+    /// Map from the independent velocities to all velocities (nv × nr); identity without couplings.
+    pub coupling_map: DMatrix<f64>,
+    /// Independent degrees of freedom (columns of `coupling_map`).
+    pub independent_dofs: Vec<usize>,
+    // Scratch.
+    body_inertia: Vec<Matrix6<f64>>,
+    composite: Vec<Matrix6<f64>>,
+    cdof: Vec<V6>,
+    cdof_dot: Vec<V6>,
+    body_vel: Vec<V6>,
+    body_acc: Vec<V6>,
+    body_force: Vec<V6>,
+}
+
+fn skew(v: &V3) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// Spatial motion cross product `v × m`.
+fn cross_motion(v: &V6, m: &V6) -> V6 {
+    let (w, u) = (v.fixed_rows::<3>(0), v.fixed_rows::<3>(3));
+    let (w2, u2) = (m.fixed_rows::<3>(0), m.fixed_rows::<3>(3));
+    let a = w.cross(&w2);
+    let b = w.cross(&u2) + u.cross(&w2);
+    V6::new(a.x, a.y, a.z, b.x, b.y, b.z)
+}
+
+/// Spatial force cross product `v ×* f`.
+fn cross_force(v: &V6, f: &V6) -> V6 {
+    let (w, u) = (v.fixed_rows::<3>(0), v.fixed_rows::<3>(3));
+    let (n, fl) = (f.fixed_rows::<3>(0), f.fixed_rows::<3>(3));
+    let a = w.cross(&n) + u.cross(&fl);
+    let b = w.cross(&fl);
+    V6::new(a.x, a.y, a.z, b.x, b.y, b.z)
+}
+
+impl Data {
+    /// A workspace for `model`.
+    pub fn new(model: &Model) -> Data {
+        let (nv, nb, nu) = (model.nv, model.bodies.len(), model.actuators.len());
+        let independent_dofs: Vec<usize> = (0..nv)
+            .filter(|&d| !model.is_dependent(model.dof_joint[d]))
+            .collect();
+        let nr = independent_dofs.len();
+        let mut coupling_map = DMatrix::zeros(nv, nr);
+        for (r, &d) in independent_dofs.iter().enumerate() {
+            coupling_map[(d, r)] = 1.0;
+        }
+        Data {
+            kin: Kinematics::new(model),
+            ten: TendonKinematics::new(model),
+            mass: DMatrix::zeros(nv, nv),
+            bias: DVector::zeros(nv),
+            passive: DVector::zeros(nv),
+            actuation: DVector::zeros(nv),
+            limit: DVector::zeros(nv),
+            actuator_length: vec![0.0; nu],
+            actuator_velocity: vec![0.0; nu],
+            actuator_force: vec![0.0; nu],
+            qacc: DVector::zeros(nv),
+            coupling_map,
+            independent_dofs,
+            body_inertia: vec![Matrix6::zeros(); nb],
+            composite: vec![Matrix6::zeros(); nb],
+            cdof: vec![V6::zeros(); nv],
+            cdof_dot: vec![V6::zeros(); nv],
+            body_vel: vec![V6::zeros(); nb],
+            body_acc: vec![V6::zeros(); nb],
+            body_force: vec![V6::zeros(); nb],
+        }
+    }
+
+    /// Position stage: kinematics, tendons, spatial inertias, motion subspaces, mass matrix.
+    pub fn positions(&mut self, model: &Model, qpos: &[f64]) {
+        self.kin.update(model, qpos);
+        self.ten.update(model, &self.kin);
+        for b in 1..model.bodies.len() {
+            let body = &model.bodies[b];
+            let r = &self.kin.xrot[b];
+            let ic = r * body.inertia * r.transpose();
+            let c = skew(&self.kin.xipos[b]);
+            let m = body.mass;
+            let mut i6 = Matrix6::zeros();
+            i6.fixed_view_mut::<3, 3>(0, 0)
+                .copy_from(&(ic + m * c * c.transpose()));
+            i6.fixed_view_mut::<3, 3>(0, 3).copy_from(&(m * c));
+            i6.fixed_view_mut::<3, 3>(3, 0)
+                .copy_from(&(m * c.transpose()));
+            i6.fixed_view_mut::<3, 3>(3, 3)
+                .copy_from(&(Matrix3::identity() * m));
+            self.body_inertia[b] = i6;
+        }
+        for d in 0..model.nv {
+            let a = self.kin.dof_axis[d];
+            self.cdof[d] = if self.kin.dof_rotates[d] {
+                let l = self.kin.dof_anchor[d].cross(&a);
+                V6::new(a.x, a.y, a.z, l.x, l.y, l.z)
+            } else {
+                V6::new(0.0, 0.0, 0.0, a.x, a.y, a.z)
+            };
+        }
+        // Composite rigid body algorithm.
+        self.composite.clone_from(&self.body_inertia);
+        for b in (1..model.bodies.len()).rev() {
+            if let Some(p) = model.bodies[b].parent.filter(|&p| p > 0) {
+                let child = self.composite[b];
+                self.composite[p] += child;
+            }
+        }
+        self.mass.fill(0.0);
+        for i in 0..model.nv {
+            let f = self.composite[model.dof_body[i]] * self.cdof[i];
+            let mut j = Some(i);
+            while let Some(jj) = j {
+                let v = self.cdof[jj].dot(&f);
+                self.mass[(i, jj)] = v;
+                self.mass[(jj, i)] = v;
+                j = model.dof_parent[jj];
+            }
+            self.mass[(i, i)] += model.joints[model.dof_joint[i]].armature;
+        }
+        for (i, act) in model.actuators.iter().enumerate() {
+            self.actuator_length[i] =
+                crate::kinematics::actuator_length(model, act.transmission, &self.ten, qpos);
+        }
+    }
+
+    /// Velocity stage: the bias force by recursive Newton–Euler with zero joint acceleration and
+    /// gravity as a base acceleration.
+    pub fn velocities(&mut self, model: &Model, qvel: &[f64]) {
+        let g = model.gravity;
+        let base_acc = V6::new(0.0, 0.0, 0.0, -g.x, -g.y, -g.z);
+        for b in 1..model.bodies.len() {
+            let body = &model.bodies[b];
+            let p = body.parent.expect("non-world body");
+            let (mut v, mut a) = if p == 0 {
+                (V6::zeros(), base_acc)
+            } else {
+                (self.body_vel[p], self.body_acc[p])
+            };
+            for j in body.first_joint..body.first_joint + body.joint_count {
+                let joint = &model.joints[j];
+                for d in joint.dof_adr..joint.dof_adr + joint.kind.nv() {
+                    self.cdof_dot[d] = cross_motion(&v, &self.cdof[d]);
+                    a += self.cdof_dot[d] * qvel[d];
+                    v += self.cdof[d] * qvel[d];
+                }
+            }
+            self.body_vel[b] = v;
+            self.body_acc[b] = a;
+            let iv = self.body_inertia[b] * v;
+            self.body_force[b] = self.body_inertia[b] * a + cross_force(&v, &iv);
+        }
+        for b in (1..model.bodies.len()).rev() {
+            if let Some(p) = model.bodies[b].parent.filter(|&p| p > 0) {
+                let f = self.body_force[b];
+                self.body_force[p] += f;
+            }
+        }
+        for d in 0..model.nv {
+            self.bias[d] = self.cdof[d].dot(&self.body_force[model.dof_body[d]]);
+        }
+        for (i, act) in model.actuators.iter().enumerate() {
+            self.actuator_velocity[i] = match act.transmission {
+                Transmission::Tendon(t) => {
+                    let row = self.ten.moment.row(t);
+                    (0..model.nv).map(|d| row[d] * qvel[d]).sum()
+                }
+                Transmission::Joint(j) => qvel[model.joints[j].dof_adr],
+            };
+        }
+    }
+
+    /// The coupling map's derivative term `Ṫ·q̇_r` (nv) and refreshes `coupling_map` at `qpos`.
+    fn couplings(&mut self, model: &Model, qpos: &[f64], qvel: &[f64]) -> DVector<f64> {
+        let mut tdot_v = DVector::zeros(model.nv);
+        for c in &model.couplings {
+            let ind = &model.joints[c.independent];
+            let dep = &model.joints[c.dependent];
+            let (_, d1, d2) = c.eval(qpos[ind.qpos_adr], ind.reference, dep.reference);
+            let r = self
+                .independent_dofs
+                .iter()
+                .position(|&d| d == ind.dof_adr)
+                .expect("independent dof");
+            self.coupling_map[(dep.dof_adr, r)] = d1;
+            tdot_v[dep.dof_adr] = d2 * qvel[ind.dof_adr] * qvel[ind.dof_adr];
+        }
+        tdot_v
+    }
+}
+
+/// Actuator force for actuator `i` given length, velocity, activation and control (MuJoCo's
+/// `mj_fwdActuation`: `gain·(act or ctrl) + bias`).
+fn actuator_force(model: &Model, i: usize, len: f64, vel: f64, act: f64, ctrl: f64) -> f64 {
+    let a = &model.actuators[i];
+    let input = match a.dynamics {
+        ActDynamics::None => ctrl,
+        ActDynamics::Muscle(_) => act,
+    };
+    let gain = match &a.gain {
+        Gain::Fixed(g) => *g,
+        Gain::Muscle(p) => muscle::gain(p, len, vel, a.lengthrange, 0.0),
+    };
+    let bias = match &a.bias {
+        Bias::None => 0.0,
+        Bias::Affine(b) => b[0] + b[1] * len + b[2] * vel,
+        Bias::Muscle(p) => muscle::bias(p, len, a.lengthrange, 0.0),
+    };
+    gain * input + bias
+}
+
+/// One MuJoCo-style Euler step of `model.timestep`: forces from the current state, joint
+/// accelerations from `(M + h·D)·q̈ = τ − c` in independent coordinates, then `q̇ += h·q̈`,
+/// `q += h·q̇` (quaternions integrated on the manifold), dependent joints set by their couplings, and
+/// activations `act += h·ȧct`.
+pub fn step(model: &Model, data: &mut Data, state: &mut State) {
+    let h = model.timestep;
+    let nv = model.nv;
+    data.positions(model, &state.qpos);
+    data.velocities(model, &state.qvel);
+
+    // Actuation.
+    data.actuation.fill(0.0);
+    for i in 0..model.actuators.len() {
+        let a = &model.actuators[i];
+        let ctrl = match a.ctrlrange {
+            Some([lo, hi]) => state.ctrl[i].clamp(lo, hi),
+            None => state.ctrl[i],
+        };
+        let f = actuator_force(
+            model,
+            i,
+            data.actuator_length[i],
+            data.actuator_velocity[i],
+            state.act[i],
+            ctrl,
+        );
+        data.actuator_force[i] = f;
+        match a.transmission {
+            Transmission::Tendon(t) => {
+                for d in 0..nv {
+                    data.actuation[d] += data.ten.moment[(t, d)] * f;
+                }
+            }
+            Transmission::Joint(j) => data.actuation[model.joints[j].dof_adr] += f,
+        }
+    }
+    // Passive springs and damping.
+    let mut damping = DVector::zeros(nv);
+    for joint in &model.joints {
+        if joint.kind == JointKind::Free {
+            continue;
+        }
+        let d = joint.dof_adr;
+        damping[d] = joint.damping;
+        data.passive[d] = -joint.damping * state.qvel[d]
+            - joint.stiffness * (state.qpos[joint.qpos_adr] - joint.springref);
+    }
+
+    // Reduced (independent) coordinates.
+    let tdot_v = data.couplings(model, &state.qpos, &state.qvel);
+    let t = &data.coupling_map;
+    let m_r = t.transpose() * &data.mass * t;
+    let d_r = t.transpose() * DMatrix::from_diagonal(&damping) * t;
+    let force = &data.actuation + &data.passive - &data.bias - &data.mass * &tdot_v;
+    let rhs = t.transpose() * &force;
+
+    // Soft joint limits on independent joints (diagonal approximation of MuJoCo's constraint solve).
+    let mut lhs = &m_r + &d_r * h;
+    let limit_r = limit_forces(model, data, state, &lhs, &rhs);
+    data.limit.fill(0.0);
+    for (r, &d) in data.independent_dofs.iter().enumerate() {
+        data.limit[d] = limit_r[r];
+    }
+    let rhs = rhs + limit_r;
+    let qacc_r = match lhs.clone().cholesky() {
+        Some(ch) => ch.solve(&rhs),
+        None => {
+            lhs.fill_diagonal(1.0);
+            rhs
+        }
+    };
+    let qacc = t * &qacc_r + &tdot_v;
+    data.qacc.copy_from(&qacc);
+
+    // Integrate independent velocities and positions; dependents follow.
+    for (r, &d) in data.independent_dofs.iter().enumerate() {
+        state.qvel[d] += h * qacc_r[r];
+    }
+    integrate_positions(model, state, h);
+    set_dependents(model, state);
+
+    // Activation dynamics.
+    for (i, a) in model.actuators.iter().enumerate() {
+        if let ActDynamics::Muscle(p) = &a.dynamics {
+            state.act[i] += h * muscle::activation_rate(state.ctrl[i], state.act[i], p);
+        }
+    }
+    state.time += h;
+}
+
+/// Positions from velocities: `q += h·q̇` for hinges and slides, free joints translate and rotate
+/// their quaternion by the body-frame angular velocity (MuJoCo's `mj_integratePos`).
+fn integrate_positions(model: &Model, state: &mut State, h: f64) {
+    for joint in &model.joints {
+        let (qa, da) = (joint.qpos_adr, joint.dof_adr);
+        match joint.kind {
+            JointKind::Hinge | JointKind::Slide => state.qpos[qa] += h * state.qvel[da],
+            JointKind::Free => {
+                for i in 0..3 {
+                    state.qpos[qa + i] += h * state.qvel[da + i];
+                }
+                let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    state.qpos[qa + 3],
+                    state.qpos[qa + 4],
+                    state.qpos[qa + 5],
+                    state.qpos[qa + 6],
+                ));
+                let w = V3::new(state.qvel[da + 3], state.qvel[da + 4], state.qvel[da + 5]);
+                let q = q * UnitQuaternion::from_scaled_axis(w * h);
+                let c = q.quaternion();
+                state.qpos[qa + 3..qa + 7].copy_from_slice(&[c.w, c.i, c.j, c.k]);
+            }
+        }
+    }
+}
+
+/// Dependent joints take their couplings' positions and velocities.
+pub fn set_dependents(model: &Model, state: &mut State) {
+    for c in &model.couplings {
+        let ind = &model.joints[c.independent];
+        let dep = &model.joints[c.dependent];
+        let (q, d1, _) = c.eval(state.qpos[ind.qpos_adr], ind.reference, dep.reference);
+        state.qpos[dep.qpos_adr] = q;
+        state.qvel[dep.dof_adr] = d1 * state.qvel[ind.dof_adr];
+    }
+}
+
+/// Limit forces in independent coordinates: each violated limit is MuJoCo's soft constraint solved on
+/// its own, with the effective inverse inertia `(lhs⁻¹)_rr` of its degree of freedom.
+fn limit_forces(
+    model: &Model,
+    data: &Data,
+    state: &State,
+    lhs: &DMatrix<f64>,
+    rhs: &DVector<f64>,
+) -> DVector<f64> {
+    let nr = data.independent_dofs.len();
+    let mut out = DVector::zeros(nr);
+    let violated: Vec<(usize, f64, f64)> = data
+        .independent_dofs
+        .iter()
+        .enumerate()
+        .filter_map(|(r, &d)| {
+            let joint = &model.joints[model.dof_joint[d]];
+            let [lo, hi] = joint.range?;
+            let q = state.qpos[joint.qpos_adr];
+            if q < lo {
+                Some((r, q - lo, 1.0))
+            } else if q > hi {
+                Some((r, hi - q, -1.0))
+            } else {
+                None
+            }
+        })
+        .collect();
+    if violated.is_empty() {
+        return out;
+    }
+    let Some(ch) = lhs.clone().cholesky() else {
+        return out;
+    };
+    let inv = ch.inverse();
+    let a0 = ch.solve(rhs);
+    let [timeconst, dampratio] = LIMIT_SOLREF;
+    let timeconst = timeconst.max(2.0 * model.timestep);
+    let dmax = LIMIT_SOLIMP[1];
+    let k = 1.0 / (dmax * dmax * timeconst * timeconst * dampratio * dampratio);
+    let b = 2.0 / (dmax * timeconst);
+    for (r, dist, sign) in violated {
+        let d = data.independent_dofs[r];
+        let imp = crate::contact::impedance(&LIMIT_SOLIMP, -dist);
+        let vel = sign * state.qvel[d];
+        let a_ref = -b * vel - k * imp * dist;
+        let a_inv = inv[(r, r)];
+        let r_reg = (1.0 - imp) / imp * a_inv;
+        let a_unc = sign * a0[r];
+        if a_ref > a_unc {
+            out[r] = sign * (a_ref - a_unc) / (a_inv + r_reg);
+        }
+    }
+    out
+}
