@@ -226,10 +226,11 @@ impl Data {
             };
             for j in body.first_joint..body.first_joint + body.joint_count {
                 let joint = &model.joints[j];
-                for d in joint.dof_adr..joint.dof_adr + joint.kind.nv() {
+                let dofs = joint.dof_adr..joint.dof_adr + joint.kind.nv();
+                for (d, &qd) in dofs.clone().zip(&qvel[dofs]) {
                     self.cdof_dot[d] = cross_motion(&v, &self.cdof[d]);
-                    a += self.cdof_dot[d] * qvel[d];
-                    v += self.cdof[d] * qvel[d];
+                    a += self.cdof_dot[d] * qd;
+                    v += self.cdof[d] * qd;
                 }
             }
             self.body_vel[b] = v;
