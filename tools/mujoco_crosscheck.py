@@ -8,8 +8,12 @@ the middle 90% of their range, dependent joints set by their equality polynomial
 random pose), it records MuJoCo's actuator lengths, moment arms (`actuator_moment`, dense nu x nv),
 site positions, body poses, the joint-space mass matrix and the bias force (Coriolis + gravity +
 passive). It then records two 0.5 s motions from the model's first keyframe (or qpos0): "passive"
-(all controls zero) and "actuated" (constant controls 0.2..0.8 per actuator), each step's qpos,
-qvel and activation. Needs `pip install mujoco numpy`.
+(muscle controls zero; from the keyframe named "hang" if there is one) and "actuated" (constant muscle
+controls drawn in --ctrl-range; from the first keyframe), each step's qpos,
+qvel and activation. Both motions must stay clear of the joint limits (where MuJoCo's constraint solver
+and ours differ by design): starting from that posture, the tool perturbs the start (and, for the
+actuated motion, redraws the controls) until the whole 0.5 s stays at least --clearance from every
+limit, and records the clearance it found. Needs `pip install mujoco numpy`.
 """
 import argparse
 import json
@@ -107,6 +111,44 @@ def motion(m, d, start_qpos, ctrl, steps):
     return {"start_qpos": list(map(float, start_qpos)), "ctrl": list(map(float, ctrl)), "qpos": qpos, "qvel": qvel, "act": act}
 
 
+def limit_clearance(m, qpos_rows):
+    """Smallest distance of any limited hinge/slide joint from its limits over a trajectory."""
+    worst = np.inf
+    q = np.asarray(qpos_rows)
+    for j in range(m.njnt):
+        if not m.jnt_limited[j] or m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+            continue
+        lo, hi = m.jnt_range[j]
+        col = q[:, m.jnt_qposadr[j]]
+        worst = min(worst, float(np.min(col - lo)), float(np.min(hi - col)))
+    return worst
+
+
+def clear_motion(m, d, start, ctrl_for, steps, clearance, rng, coup, tries=300):
+    """The first motion, from `start` perturbed, that stays `clearance` away from every joint limit."""
+    best = None
+    for attempt in range(tries):
+        s = start.copy()
+        if attempt > 0:
+            for j in range(m.njnt):
+                adr = m.jnt_qposadr[j]
+                if m.jnt_type[j] in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+                    s[adr] += rng.normal(0.0, 0.03)
+                    if m.jnt_limited[j]:
+                        lo, hi = m.jnt_range[j]
+                        s[adr] = np.clip(s[adr], lo + 2 * clearance, hi - 2 * clearance)
+            apply_couplings(m, s, coup)
+        ctrl = ctrl_for(s, attempt)
+        rec = motion(m, d, s, ctrl, steps)
+        c = limit_clearance(m, [s] + rec["qpos"])
+        rec["limit_clearance"] = c
+        if c >= clearance:
+            return rec
+        if best is None or c > best["limit_clearance"]:
+            best = rec
+    sys.exit(f"no motion stayed {clearance} clear of the joint limits in {tries} tries (best {best['limit_clearance']:.4f})")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model")
@@ -114,6 +156,10 @@ def main():
     ap.add_argument("--configs", type=int, default=24)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--steps", type=int, default=250)
+    ap.add_argument("--clearance", type=float, default=0.02, help="rad or m from every joint limit")
+    ap.add_argument("--ctrl-range", type=float, nargs=2, default=(0.05, 0.3), help="muscle controls of the actuated motion")
+    ap.add_argument("--actuated-key", default=None, help="keyframe the actuated motion starts from (default: the first)")
+    ap.add_argument("--quiet", default="", help="comma-separated muscles left at zero control in the actuated motion")
     args = ap.parse_args()
 
     m = mujoco.MjModel.from_xml_path(args.model)
@@ -134,18 +180,45 @@ def main():
     start = m.key_qpos[0].copy() if m.nkey > 0 else m.qpos0.copy()
     apply_couplings(m, start, coup)
     ctrl_rng = np.random.default_rng(args.seed + 1)
-    actuated = np.zeros(m.nu)
-    for i in range(m.nu):
-        lo, hi = m.actuator_ctrlrange[i] if m.actuator_ctrllimited[i] else (0.0, 1.0)
-        if m.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_MUSCLE:
-            actuated[i] = ctrl_rng.uniform(0.2, 0.8)
-        else:  # position servos hold their start position
-            j = m.actuator_trnid[i][0]
-            actuated[i] = np.clip(start[m.jnt_qposadr[j]], lo, hi)
-    passive = np.zeros(m.nu)
-    for i in range(m.nu):
-        if m.actuator_dyntype[i] != mujoco.mjtDyn.mjDYN_MUSCLE:
-            passive[i] = actuated[i]
+    motion_rng = np.random.default_rng(args.seed + 2)
+
+    def servo_targets(s):
+        ctrl = np.zeros(m.nu)
+        for i in range(m.nu):
+            if m.actuator_dyntype[i] != mujoco.mjtDyn.mjDYN_MUSCLE:  # position servos hold their start
+                lo, hi = m.actuator_ctrlrange[i] if m.actuator_ctrllimited[i] else (-np.inf, np.inf)
+                ctrl[i] = np.clip(s[m.jnt_qposadr[m.actuator_trnid[i][0]]], lo, hi)
+        return ctrl
+
+    def actuated_ctrl(s, attempt):
+        ctrl = servo_targets(s)
+        for i in range(m.nu):
+            if m.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_MUSCLE and names[i] not in quiet:
+                ctrl[i] = ctrl_rng.uniform(*args.ctrl_range)
+        return ctrl
+
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i) for i in range(m.nu)]
+    quiet = set(filter(None, args.quiet.split(",")))
+    unknown = quiet - set(names)
+    if unknown:
+        sys.exit(f"--quiet: no actuators named {sorted(unknown)}")
+
+    def key(name, default):
+        for k in range(m.nkey):
+            if mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_KEY, k) == name:
+                q = m.key_qpos[k].copy()
+                apply_couplings(m, q, coup)
+                return q
+        if name is not None and name != "hang":
+            sys.exit(f"no keyframe named {name}")
+        return default
+
+    hang = key("hang", start)
+    act_start = key(args.actuated_key, start)
+    motions = {
+        "passive": clear_motion(m, d, hang, lambda s, a: servo_targets(s), args.steps, args.clearance, motion_rng, coup),
+        "actuated": clear_motion(m, d, act_start, actuated_ctrl, args.steps, args.clearance, motion_rng, coup),
+    }
 
     fixture = {
         "mujoco_version": mujoco.__version__,
@@ -160,10 +233,7 @@ def main():
         "body_ipos": m.body_ipos.tolist(),
         "actuator_lengthrange": m.actuator_lengthrange.tolist(),
         "configs": configs,
-        "motions": {
-            "passive": motion(m, d, start, passive, args.steps),
-            "actuated": motion(m, d, start, actuated, args.steps),
-        },
+        "motions": motions,
     }
     with open(args.out, "w") as f:
         json.dump(fixture, f)
