@@ -23,6 +23,8 @@ enum Command {
     Ball(Box<cmd::ball::BallArgs>),
     /// Measure simulator speed against MuJoCo on the same work.
     Bench(cmd::bench::BenchArgs),
+    /// Inspect an MJCF model, or print its muscle lengths and moment arms at a configuration.
+    Model(cmd::model::ModelArgs),
 }
 
 fn main() -> ExitCode {
@@ -30,6 +32,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Ball(args) => cmd::ball::run(&args),
         Command::Bench(args) => cmd::bench::run(&args),
+        Command::Model(args) => cmd::model::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -14,6 +14,9 @@ The robot (side A; the dual arena turns it about (0, 0.04) for side B):
 
 Robot frame: x forward, y to the robot's left, z up; the root is at world (2.3, 0.04, 0) turned 180
 degrees about z so the robot faces the net (-x). Muscle paths run through sites only (no wrapping).
+Joint signs: shoulder_flex > 0 raises the arm forward, shoulder_abd > 0 raises it sideways,
+shoulder_rot > 0 rotates it inwards, elbow_flex > 0 bends the elbow, wrist_flex > 0 bends the hand
+towards the palm, wrist_dev > 0 towards the thumb, grip > 0 closes the fingers; lumbar signs below.
 
 Sources and honesty: segment masses follow de Leva (1996)-style proportions for a 75 kg adult
 (upper arm 2.0 kg, forearm 1.2 kg, hand 0.45 kg), the trunk lumps thorax, head and the left arm.
@@ -47,7 +50,8 @@ LEVELS = [
 # extension, +-0.5 of lateral bending and +-0.6 of axial rotation (rotation stands in for the thoracic
 # spine and hips too, which the model does not have). Dependent levels share the same range, which their
 # ratios (at most 1) keep them inside.
-LUMBAR_AXES = [("flex", (0, -1, 0), (-0.13, 0.27)), ("lat", (1, 0, 0), (-0.13, 0.13)), ("rot", (0, 0, 1), (-0.14, 0.14))]
+# Signs: flex > 0 bends forward, lat > 0 bends to the robot's right, rot > 0 turns the chest to the left.
+LUMBAR_AXES = [("flex", (0, 1, 0), (-0.13, 0.27)), ("lat", (1, 0, 0), (-0.13, 0.13)), ("rot", (0, 0, 1), (-0.14, 0.14))]
 
 # --- trunk muscles (left side; the right side mirrors y) -----------------------------------------
 # name: (force N, [(body, (x, y, z)), ...]); bodies: pelvis, L5..L1, thorax.
@@ -97,7 +101,7 @@ ARM = {
     "TRIlong": (800, [("thorax", (-0.03, -0.18, 0.28)), ("humerus", (-0.03, 0.0, -0.20)), ("ulna", (-0.025, 0.0, 0.02))]),
     "TRIlat": (625, [("humerus", (-0.015, -0.01, -0.08)), ("humerus", (-0.03, 0.0, -0.22)), ("ulna", (-0.025, 0.0, 0.02))]),
     "TRImed": (625, [("humerus", (-0.01, 0.01, -0.14)), ("humerus", (-0.028, 0.0, -0.24)), ("ulna", (-0.025, 0.0, 0.02))]),
-    "ANC": (350, [("humerus", (-0.01, -0.03, -0.29)), ("ulna", (-0.02, -0.01, -0.05))]),
+    "ANC": (350, [("humerus", (-0.035, -0.025, -0.27)), ("ulna", (-0.03, -0.01, -0.02))]),
     "BIClong": (625, [("thorax", (0.0, -0.19, 0.33)), ("humerus", (0.03, -0.005, -0.03)), ("humerus", (0.03, 0.0, -0.22)), ("radius", (0.02, 0.0, -0.04))]),
     "BICshort": (435, [("thorax", (0.04, -0.16, 0.30)), ("humerus", (0.025, 0.01, -0.10)), ("humerus", (0.03, 0.005, -0.22)), ("radius", (0.02, 0.0, -0.04))]),
     "BRA": (990, [("humerus", (0.015, 0.0, -0.17)), ("ulna", (0.02, 0.0, -0.035))]),
@@ -116,7 +120,8 @@ ARM = {
     "FDS": (320, [("humerus", (0.0, 0.034, -0.285)), ("radius", (0.0, 0.02, -0.24)), ("hand", (0.0, 0.02, -0.06)), ("fingers", (0.0, 0.015, -0.03))]),
     "FDP": (350, [("ulna", (0.0, 0.015, -0.06)), ("ulna", (0.0, 0.018, -0.24)), ("hand", (0.0, 0.018, -0.065)), ("fingers", (0.0, 0.012, -0.05))]),
     "FPL": (280, [("radius", (0.015, 0.015, -0.10)), ("radius", (0.015, 0.018, -0.24)), ("hand", (0.02, 0.015, -0.05)), ("fingers", (0.015, 0.012, -0.04))]),
-    "EDC": (120, [("humerus", (0.0, -0.035, -0.29)), ("radius", (0.0, -0.02, -0.24)), ("hand", (0.0, -0.015, -0.06)), ("fingers", (0.0, -0.01, -0.03))]),
+    "EDC": (120, [("humerus", (0.0, -0.035, -0.29)), ("radius", (0.0, -0.02, -0.24)), ("hand", (0.0, -0.015, -0.06)),
+                  ("hand", (0.0, -0.018, -0.085)), ("fingers", (0.0, -0.016, -0.01)), ("fingers", (0.0, -0.012, -0.03))]),
 }
 
 GRIP_MUSCLES = ["FDS", "FDP", "FPL"]

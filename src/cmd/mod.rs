@@ -3,6 +3,7 @@
 
 pub mod ball;
 pub mod bench;
+pub mod model;
 
 use nalgebra::Vector3;
 

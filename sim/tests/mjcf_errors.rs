@@ -1,0 +1,193 @@
+//! Bad models are refused with the file, the line and what is wrong; never a panic.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use sim::mjcf::{self, MjcfError};
+
+fn err(xml: &str) -> MjcfError {
+    mjcf::parse_str(xml, "bad.xml").expect_err("must be refused")
+}
+
+const GOOD_BODY: &str = r#"<body name="b" pos="0 0 1"><joint name="j" axis="0 1 0" range="-1 1"/>
+  <inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.01"/><site name="s1" pos="0 0 0.1"/><site name="s2" pos="0 0.1 -0.1"/></body>"#;
+
+fn model(body: &str, rest: &str) -> String {
+    format!("<mujoco model=\"t\">\n<compiler angle=\"radian\"/>\n<worldbody>\n{body}\n</worldbody>\n{rest}\n</mujoco>\n")
+}
+
+#[test]
+fn a_good_model_loads() {
+    let m = mjcf::parse_str(
+        &model(
+            &format!("<site name=\"w\" pos=\"0 0 1.2\"/>{GOOD_BODY}"),
+            r#"<tendon><spatial name="t"><site site="w"/><site site="s2"/></spatial></tendon>
+               <actuator><muscle name="m" tendon="t" force="100"/></actuator>"#,
+        ),
+        "good.xml",
+    )
+    .expect("loads");
+    assert_eq!(m.nq, 1);
+    // No lengthrange given: the loader estimated one, and it brackets the length at qpos0.
+    let lr = m.actuators[0].lengthrange;
+    assert!(
+        !m.actuators[0].lengthrange_given && lr[0] > 0.0 && lr[0] < lr[1],
+        "{lr:?}"
+    );
+}
+
+#[test]
+fn malformed_xml_names_the_line() {
+    let e = err("<mujoco>\n<worldbody>\n<body name=\"a\">\n</worldbody>\n</mujoco>");
+    assert_eq!(e.file, "bad.xml");
+    assert!(e.line >= 3 && e.message.contains("malformed XML"), "{e}");
+}
+
+#[test]
+fn unknown_elements_and_attributes_are_named() {
+    let e = err(&model("<body name=\"b\"><light/></body>", ""));
+    assert!(e.message.contains("<light>") && e.line == 4, "{e}");
+    let e = err(&model("<body name=\"b\" gravcomp=\"1\"/>", ""));
+    assert!(e.message.contains("gravcomp") && e.line == 4, "{e}");
+    let e = err(&model(GOOD_BODY, "<sensor/>"));
+    assert!(e.message.contains("<sensor>"), "{e}");
+    let e = err(&model(r#"<body name="b"><joint type="ball"/></body>"#, ""));
+    assert!(e.message.contains("type=\"ball\""), "{e}");
+    let e = err(&model(
+        GOOD_BODY,
+        r#"<tendon><spatial name="t"><site site="s1"/><geom geom="g"/></spatial></tendon>"#,
+    ));
+    assert!(e.message.contains("wrapping"), "{e}");
+    let e = err("<robot/>");
+    assert!(e.message.contains("<mujoco>"), "{e}");
+}
+
+#[test]
+fn dangling_references_are_named() {
+    let e = err(&model(
+        GOOD_BODY,
+        r#"<tendon><spatial name="t"><site site="s1"/><site site="nowhere"/></spatial></tendon>"#,
+    ));
+    assert!(e.message.contains("nowhere"), "{e}");
+    let e = err(&model(
+        GOOD_BODY,
+        r#"<actuator><muscle name="m" tendon="ghost"/></actuator>"#,
+    ));
+    assert!(e.message.contains("ghost"), "{e}");
+    let e = err(&model(
+        GOOD_BODY,
+        r#"<equality><joint joint1="j" joint2="phantom"/></equality>"#,
+    ));
+    assert!(e.message.contains("phantom"), "{e}");
+    let e = err(&model(r#"<body childclass="nope"/>"#, ""));
+    assert!(e.message.contains("nope"), "{e}");
+}
+
+#[test]
+fn non_positive_mass_or_inertia_is_refused() {
+    let e = err(&model(
+        r#"<body name="b"><joint axis="0 1 0"/><inertial pos="0 0 0" mass="0" diaginertia="1 1 1"/></body>"#,
+        "",
+    ));
+    assert!(e.message.contains("mass") && e.line == 4, "{e}");
+    let e = err(&model(
+        r#"<body name="b"><joint axis="0 1 0"/><inertial pos="0 0 0" mass="1" diaginertia="1 -1 1"/></body>"#,
+        "",
+    ));
+    assert!(e.message.contains("inertia"), "{e}");
+    // A moving body with neither inertial nor geoms has no mass.
+    let e = err(&model(
+        r#"<body name="ghost"><joint axis="0 1 0"/></body>"#,
+        "",
+    ));
+    assert!(e.message.contains("ghost") && e.line == 4, "{e}");
+}
+
+#[test]
+fn bad_numbers_ranges_and_counts_are_refused() {
+    let e = err(&model(r#"<body name="b" pos="0 0"/>"#, ""));
+    assert!(e.message.contains("expected 3 numbers"), "{e}");
+    let e = err(&model(r#"<body name="b" pos="0 x 1"/>"#, ""));
+    assert!(e.message.contains("'x'"), "{e}");
+    let e = err(&model(
+        r#"<body name="b"><joint range="1 -1"/><geom size="0.1"/></body>"#,
+        "",
+    ));
+    assert!(e.message.contains("range"), "{e}");
+    let e = err(&model(
+        GOOD_BODY,
+        r#"<keyframe><key qpos="1 2"/></keyframe>"#,
+    ));
+    assert!(e.message.contains("nq = 1"), "{e}");
+    let e = err(&model(
+        GOOD_BODY,
+        r#"<equality><joint joint1="j" joint2="j"/></equality>"#,
+    ));
+    assert!(e.message.contains("same joint"), "{e}");
+}
+
+#[test]
+fn includes_are_spliced_and_their_errors_name_the_included_file() {
+    let files: HashMap<PathBuf, String> = [
+        (
+            PathBuf::from("dir/main.xml"),
+            "<mujoco>\n<include file=\"parts/body.xml\"/>\n</mujoco>".to_string(),
+        ),
+        (
+            PathBuf::from("dir/parts/body.xml"),
+            format!("<mujoco>\n<worldbody>\n{GOOD_BODY}\n</worldbody>\n</mujoco>"),
+        ),
+        (
+            PathBuf::from("dir/broken.xml"),
+            "<mujoco>\n<include file=\"parts/bad.xml\"/>\n</mujoco>".to_string(),
+        ),
+        (
+            PathBuf::from("dir/parts/bad.xml"),
+            "<mujoco>\n\n<worldbody><camera/></worldbody>\n</mujoco>".to_string(),
+        ),
+        (
+            PathBuf::from("dir/loop.xml"),
+            "<mujoco>\n<include file=\"loop.xml\"/>\n</mujoco>".to_string(),
+        ),
+    ]
+    .into_iter()
+    .collect();
+    let read = |p: &Path| -> std::io::Result<String> {
+        files
+            .get(p)
+            .cloned()
+            .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"))
+    };
+    let m = mjcf::load(Path::new("dir/main.xml"), &read).expect("loads through the include");
+    assert_eq!(m.joints[0].name, "j");
+    let e = mjcf::load(Path::new("dir/broken.xml"), &read).unwrap_err();
+    assert!(
+        e.file.ends_with("parts/bad.xml") && e.line == 3 && e.message.contains("<camera>"),
+        "{e}"
+    );
+    let e = mjcf::load(Path::new("dir/missing.xml"), &read).unwrap_err();
+    assert!(e.message.contains("cannot read"), "{e}");
+    let e = mjcf::load(Path::new("dir/loop.xml"), &read).unwrap_err();
+    assert!(e.message.contains("nested"), "{e}");
+}
+
+#[test]
+fn defaults_and_childclass_apply_like_mujoco() {
+    let m = mjcf::parse_str(
+        r#"<mujoco><compiler angle="degree"/>
+        <default><joint damping="3"/><default class="stiff"><joint damping="7" stiffness="2"/></default></default>
+        <worldbody><body name="a" childclass="stiff"><joint name="ja" range="-90 90"/><geom size="0.1"/>
+          <body name="b"><joint name="jb" class="main"/><geom size="0.1"/></body></body></worldbody></mujoco>"#,
+        "defaults.xml",
+    )
+    .expect("loads");
+    let (ja, jb) = (&m.joints[0], &m.joints[1]);
+    assert_eq!((ja.damping, ja.stiffness), (7.0, 2.0));
+    assert_eq!((jb.damping, jb.stiffness), (3.0, 0.0));
+    assert!(
+        (ja.range.unwrap()[1] - std::f64::consts::FRAC_PI_2).abs() < 1e-12,
+        "degrees converted"
+    );
+    // Sphere of radius 0.1 at density 1000.
+    assert!((m.bodies[1].mass - 1000.0 * 4.0 / 3.0 * std::f64::consts::PI * 1e-3).abs() < 1e-9);
+}

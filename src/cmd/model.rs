@@ -1,0 +1,294 @@
+//! `rally model`: look inside an MJCF model — its structure (`inspect`) and its muscle geometry at a
+//! configuration (`kinematics`).
+
+use std::path::{Path, PathBuf};
+
+use clap::{ArgGroup, Args, Subcommand};
+use serde_json::{json, Value};
+use sim::kinematics::{actuator_length, Kinematics, TendonKinematics};
+use sim::model::{Bias, Dynamics, Gain, JointKind, Model, Transmission};
+
+use super::CliError;
+
+/// Arguments of `rally model`.
+#[derive(Args, Debug)]
+pub struct ModelArgs {
+    #[command(subcommand)]
+    command: ModelCommand,
+}
+
+#[derive(Subcommand, Debug)]
+enum ModelCommand {
+    /// Bodies, joints, degrees of freedom, muscles, actuators and couplings of a model.
+    Inspect {
+        /// MJCF model file (e.g. config/models/upper_body.xml).
+        model: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Muscle lengths and moment arms at a configuration, as JSON.
+    #[command(
+        group(ArgGroup::new("config").required(true).args(["qpos", "qpos_file"])),
+        after_help = "Output: {\"joints\":[names in model order],\"muscles\":[{\"name\":…,\"length\":…,\"moment_arms\":[one per DoF]}]}\n\
+                      A moment arm is ∂length/∂q per degree of freedom (MuJoCo's actuator_moment). Values given for\n\
+                      dependent (coupled) joints are replaced by their couplings."
+    )]
+    Kinematics {
+        /// MJCF model file.
+        model: PathBuf,
+        /// MuJoCo's qpos: every joint in model order (7 numbers for a free joint), comma-separated.
+        #[arg(long, value_name = "Q1,Q2,…", allow_hyphen_values = true)]
+        qpos: Option<String>,
+        /// A file holding the qpos as a JSON array or as numbers separated by commas or whitespace.
+        #[arg(long, value_name = "FILE")]
+        qpos_file: Option<PathBuf>,
+    },
+}
+
+/// Loads a model from disk; a problem is a usage error naming the file and line.
+pub fn load_model(path: &Path) -> Result<Model, CliError> {
+    sim::mjcf::load(path, &|p| std::fs::read_to_string(p))
+        .map_err(|e| CliError::Usage(e.to_string()))
+}
+
+/// Runs `rally model`.
+pub fn run(args: &ModelArgs) -> Result<(), CliError> {
+    match &args.command {
+        ModelCommand::Inspect { model, json } => {
+            let m = load_model(model)?;
+            if *json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&inspect_json(&m)).map_err(anyhow::Error::from)?
+                );
+            } else {
+                print!("{}", inspect_text(&m, model));
+            }
+            Ok(())
+        }
+        ModelCommand::Kinematics {
+            model,
+            qpos,
+            qpos_file,
+        } => {
+            let m = load_model(model)?;
+            let (text, source) = match (qpos, qpos_file) {
+                (Some(q), _) => (q.clone(), "--qpos".to_string()),
+                (None, Some(f)) => (
+                    std::fs::read_to_string(f).map_err(|e| {
+                        CliError::Usage(format!("--qpos-file {}: {e}", f.display()))
+                    })?,
+                    format!("--qpos-file {}", f.display()),
+                ),
+                (None, None) => return Err(CliError::Usage("give --qpos or --qpos-file".into())),
+            };
+            let q =
+                parse_qpos(&text, m.nq).map_err(|e| CliError::Usage(format!("{source}: {e}")))?;
+            println!("{}", kinematics_json(&m, &q));
+            Ok(())
+        }
+    }
+}
+
+/// Parses a qpos given as a JSON array or as numbers separated by commas or whitespace.
+fn parse_qpos(text: &str, nq: usize) -> Result<Vec<f64>, String> {
+    let t = text.trim();
+    let values: Vec<f64> = if t.starts_with('[') {
+        serde_json::from_str::<Vec<f64>>(t)
+            .map_err(|e| format!("not a JSON array of numbers: {e}"))?
+    } else {
+        t.split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .map(|s| {
+                s.parse::<f64>()
+                    .map_err(|_| format!("'{s}' is not a number"))
+            })
+            .collect::<Result<_, _>>()?
+    };
+    if values.len() != nq {
+        return Err(format!(
+            "{} numbers for a model with nq = {nq}",
+            values.len()
+        ));
+    }
+    if let Some(i) = values.iter().position(|x| !x.is_finite()) {
+        return Err(format!("entry {i} is not a finite number"));
+    }
+    Ok(values)
+}
+
+fn kinematics_json(m: &Model, qpos: &[f64]) -> Value {
+    let mut q = qpos.to_vec();
+    m.apply_couplings(&mut q);
+    let mut kin = Kinematics::new(m);
+    kin.update(m, &q);
+    let mut ten = TendonKinematics::new(m);
+    ten.update(m, &kin);
+    let muscles: Vec<Value> = m
+        .muscles()
+        .map(|(_, a)| {
+            let moment: Vec<f64> = match a.transmission {
+                Transmission::Tendon(t) => ten.moment.row(t).iter().copied().collect(),
+                Transmission::Joint(j) => {
+                    let mut row = vec![0.0; m.nv];
+                    row[m.joints[j].dof_adr] = 1.0;
+                    row
+                }
+            };
+            json!({
+                "name": a.name,
+                "length": actuator_length(m, a.transmission, &ten, &q),
+                "moment_arms": moment,
+            })
+        })
+        .collect();
+    json!({
+        "joints": m.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>(),
+        "muscles": muscles,
+    })
+}
+
+fn actuator_kind(a: &sim::model::Actuator) -> &'static str {
+    match (&a.dynamics, &a.gain, &a.bias) {
+        (Dynamics::Muscle(_), Gain::Muscle(_), Bias::Muscle(_)) => "muscle",
+        (Dynamics::None, Gain::Fixed(_), Bias::Affine(b)) if b[0] == 0.0 => "position",
+        _ => "general",
+    }
+}
+
+fn transmission_name(m: &Model, t: Transmission) -> (&'static str, String) {
+    match t {
+        Transmission::Tendon(i) => ("tendon", m.tendons[i].name.clone()),
+        Transmission::Joint(j) => ("joint", m.joints[j].name.clone()),
+    }
+}
+
+fn inspect_json(m: &Model) -> Value {
+    let independent: usize = (0..m.nv)
+        .filter(|&d| !m.is_dependent(m.dof_joint[d]))
+        .count();
+    json!({
+        "name": m.name,
+        "timestep": m.timestep,
+        "nq": m.nq,
+        "nv": m.nv,
+        "independent_dof": independent,
+        "bodies": m.bodies.iter().map(|b| json!({
+            "name": b.name,
+            "parent": b.parent.map(|p| m.bodies[p].name.clone()),
+            "mass": b.mass,
+        })).collect::<Vec<_>>(),
+        "joints": m.joints.iter().enumerate().map(|(j, joint)| json!({
+            "name": joint.name,
+            "type": joint.kind.name(),
+            "body": m.bodies[joint.body].name,
+            "range": joint.range,
+            "dependent": m.is_dependent(j),
+        })).collect::<Vec<_>>(),
+        "muscles": m.muscles().map(|(_, a)| {
+            let p = a.muscle().expect("muscle");
+            let (kind, target) = transmission_name(m, a.transmission);
+            json!({
+                "name": a.name,
+                kind: target,
+                "force": p.force,
+                "lengthrange": a.lengthrange,
+                "lengthrange_given": a.lengthrange_given,
+            })
+        }).collect::<Vec<_>>(),
+        "actuators": m.actuators.iter().map(|a| {
+            let (kind, target) = transmission_name(m, a.transmission);
+            json!({"name": a.name, "kind": actuator_kind(a), kind: target, "ctrlrange": a.ctrlrange})
+        }).collect::<Vec<_>>(),
+        "couplings": m.couplings.iter().map(|c| json!({
+            "dependent": m.joints[c.dependent].name,
+            "independent": m.joints[c.independent].name,
+            "polycoef": c.coef,
+        })).collect::<Vec<_>>(),
+        "keyframes": m.keyframes.iter().map(|k| k.name.clone()).collect::<Vec<_>>(),
+    })
+}
+
+fn inspect_text(m: &Model, path: &Path) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let independent: usize = (0..m.nv)
+        .filter(|&d| !m.is_dependent(m.dof_joint[d]))
+        .count();
+    let nmuscles = m.muscles().count();
+    let total_mass: f64 = m.bodies.iter().map(|b| b.mass).sum();
+    let _ = writeln!(s, "{} ({})", m.name, path.display());
+    let _ = writeln!(
+        s,
+        "  {} bodies ({total_mass:.2} kg), {} joints, nq {}, {} DoF ({independent} independent, {} coupled), {} actuators ({nmuscles} muscles), timestep {} s",
+        m.bodies.len() - 1,
+        m.joints.len(),
+        m.nq,
+        m.nv,
+        m.couplings.len(),
+        m.actuators.len(),
+        m.timestep
+    );
+    let _ = writeln!(s, "\nbodies");
+    for b in m.bodies.iter().skip(1) {
+        let parent = b.parent.map(|p| m.bodies[p].name.as_str()).unwrap_or("");
+        let _ = writeln!(
+            s,
+            "  {:<16} parent {:<16} {:>7.3} kg",
+            b.name, parent, b.mass
+        );
+    }
+    let _ = writeln!(s, "\njoints");
+    for (j, joint) in m.joints.iter().enumerate() {
+        let range = match (joint.range, joint.kind) {
+            (Some([lo, hi]), JointKind::Slide) => format!("[{lo:.3}, {hi:.3}] m"),
+            (Some([lo, hi]), _) => format!("[{lo:.3}, {hi:.3}] rad"),
+            (None, _) => "unlimited".into(),
+        };
+        let coupled = m
+            .couplings
+            .iter()
+            .find(|c| c.dependent == j)
+            .map(|c| format!("follows {}", m.joints[c.independent].name))
+            .unwrap_or_default();
+        let _ = writeln!(
+            s,
+            "  {:<16} {:<6} {:<10} {:<24} {coupled}",
+            joint.name,
+            joint.kind.name(),
+            m.bodies[joint.body].name,
+            range
+        );
+    }
+    let _ = writeln!(s, "\nactuators");
+    for a in &m.actuators {
+        let (kind, target) = transmission_name(m, a.transmission);
+        let extra = match a.muscle() {
+            Some(p) => format!(
+                "F {:>6.0} N  lengthrange [{:.4}, {:.4}] m",
+                p.force, a.lengthrange[0], a.lengthrange[1]
+            ),
+            None => String::new(),
+        };
+        let _ = writeln!(
+            s,
+            "  {:<16} {:<8} {kind} {:<20} {extra}",
+            a.name,
+            actuator_kind(a),
+            target
+        );
+    }
+    if !m.keyframes.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nkeyframes: {}",
+            m.keyframes
+                .iter()
+                .map(|k| k.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    s
+}
