@@ -9,7 +9,10 @@ The robot (side A; the dual arena turns it about (0, 0.04) for side B):
   rotation); the L5/S1 hinges are the three independent torso DoF and the other twelve follow them by
   linear couplings (<equality><joint polycoef>), 40 trunk muscles (20 per side);
 - a right arm: shoulder (flexion, abduction, rotation), elbow flexion, forearm pronation, wrist
-  flexion and deviation, and a finger flexion joint that closes the grip, 35 muscles;
+  flexion and deviation, and a finger flexion joint that closes the grip, 35 muscles; the finger
+  joint's upper limit (1.0 rad) is where the fingers meet the handle, a stiff limit (solreflimit 0.004,
+  solimplimit 0.99 0.999) and a damped finger (soft tissue on the handle), so that the grip muscles squeeze against it nearly
+  isometrically;
 - the paddle welded to the hand at its nominal grip pose (the grip model in `sim` may release it).
 
 Robot frame: x forward, y to the robot's left, z up; the root is at world (2.3, 0.04, 0) turned 180
@@ -245,7 +248,7 @@ def build(lengthranges=None):
     x.append(f'{arm}        <site name="palm" pos="0 0.01 -0.07" class="path"/>\n')
     x.append(site_lines("hand", arm + "        "))
     x.append(f'{arm}        <body name="fingers" pos="0 0 -0.09">\n')
-    x.append(f'{arm}          <joint name="grip" axis="1 0 0" range="0 1.6" damping="0.1" armature="0.001"/>\n')
+    x.append(f'{arm}          <joint name="grip" axis="1 0 0" range="0 1.0" damping="2" armature="0.001" solreflimit="0.004 1" solimplimit="0.99 0.999 0.001"/>\n')
     x.append(f'{arm}          <inertial pos="0 0.01 -0.03" mass="0.1" diaginertia="0.0001 0.0001 0.00003"/>\n')
     x.append(f'{arm}          <geom type="box" size="0.04 0.01 0.035" pos="0 0.01 -0.035"/>\n')
     x.append(site_lines("fingers", arm + "          "))

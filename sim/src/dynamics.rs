@@ -54,7 +54,7 @@ impl State {
 }
 
 /// Soft joint limits: MuJoCo's default `solreflimit = (0.02, 1)` (time constant, damping ratio) and
-/// `solimplimit = (0.9, 0.95, 0.001)`.
+/// `solimplimit = (0.9, 0.95, 0.001)`; a joint may set its own.
 pub const LIMIT_SOLREF: [f64; 2] = [0.02, 1.0];
 /// See [`LIMIT_SOLREF`].
 pub const LIMIT_SOLIMP: [f64; 3] = [0.9, 0.95, 0.001];
@@ -258,6 +258,25 @@ impl Data {
         }
     }
 
+    /// Angular velocity of `body` (world frame) at the state of the last [`Data::velocities`].
+    pub fn angular_velocity(&self, body: usize) -> V3 {
+        if body == 0 {
+            return V3::zeros();
+        }
+        self.body_vel[body].fixed_rows::<3>(0).into()
+    }
+
+    /// Velocity of the world point `p` moving with `body`, at the state of the last
+    /// [`Data::velocities`].
+    pub fn point_velocity(&self, body: usize, p: &V3) -> V3 {
+        if body == 0 {
+            return V3::zeros();
+        }
+        let w: V3 = self.body_vel[body].fixed_rows::<3>(0).into();
+        let v: V3 = self.body_vel[body].fixed_rows::<3>(3).into();
+        v + w.cross(p)
+    }
+
     /// The coupling map's derivative term `Ṫ·q̇_r` (nv) and refreshes `coupling_map` at `qpos`.
     fn couplings(&mut self, model: &Model, qpos: &[f64], qvel: &[f64]) -> DVector<f64> {
         let mut tdot_v = DVector::zeros(model.nv);
@@ -297,17 +316,11 @@ fn actuator_force(model: &Model, i: usize, len: f64, vel: f64, act: f64, ctrl: f
     gain * input + bias
 }
 
-/// One MuJoCo-style Euler step of `model.timestep`: forces from the current state, joint
-/// accelerations from `(M + h·D)·q̈ = τ − c` in independent coordinates, then `q̇ += h·q̈`,
-/// `q += h·q̇` (quaternions integrated on the manifold), dependent joints set by their couplings, and
-/// activations `act += h·ȧct`.
-pub fn step(model: &Model, data: &mut Data, state: &mut State) {
-    let h = model.timestep;
+/// Actuator forces (`data.actuator_force`) and their generalised force (`data.actuation`) from the
+/// actuator lengths and velocities in `data` and the activations and controls in `state` (MuJoCo's
+/// `mj_fwdActuation`; controls clamped to their ranges).
+pub fn actuate(model: &Model, data: &mut Data, state: &State) {
     let nv = model.nv;
-    data.positions(model, &state.qpos);
-    data.velocities(model, &state.qvel);
-
-    // Actuation.
     data.actuation.fill(0.0);
     for i in 0..model.actuators.len() {
         let a = &model.actuators[i];
@@ -333,6 +346,30 @@ pub fn step(model: &Model, data: &mut Data, state: &mut State) {
             Transmission::Joint(j) => data.actuation[model.joints[j].dof_adr] += f,
         }
     }
+}
+
+/// One MuJoCo-style Euler step of `model.timestep`: forces from the current state, joint
+/// accelerations from `(M + h·D)·q̈ = τ − c` in independent coordinates, then `q̇ += h·q̈`,
+/// `q += h·q̇` (quaternions integrated on the manifold), dependent joints set by their couplings, and
+/// activations `act += h·ȧct`.
+pub fn step(model: &Model, data: &mut Data, state: &mut State) {
+    step_with_force(model, data, state, None);
+}
+
+/// [`step`] with an extra generalised force (nv) from outside the model, e.g. a ball's impulse on
+/// the paddle spread over the step.
+pub fn step_with_force(
+    model: &Model,
+    data: &mut Data,
+    state: &mut State,
+    external: Option<&DVector<f64>>,
+) {
+    let h = model.timestep;
+    let nv = model.nv;
+    data.positions(model, &state.qpos);
+    data.velocities(model, &state.qvel);
+
+    actuate(model, data, state);
     // Passive springs and damping.
     let mut damping = DVector::zeros(nv);
     for joint in &model.joints {
@@ -350,7 +387,10 @@ pub fn step(model: &Model, data: &mut Data, state: &mut State) {
     let t = &data.coupling_map;
     let m_r = t.transpose() * &data.mass * t;
     let d_r = t.transpose() * DMatrix::from_diagonal(&damping) * t;
-    let force = &data.actuation + &data.passive - &data.bias - &data.mass * &tdot_v;
+    let mut force = &data.actuation + &data.passive - &data.bias - &data.mass * &tdot_v;
+    if let Some(ext) = external {
+        force += ext;
+    }
     let rhs = t.transpose() * &force;
 
     // Soft joint limits on independent joints (diagonal approximation of MuJoCo's constraint solve).
@@ -460,14 +500,16 @@ fn limit_forces(
     };
     let inv = ch.inverse();
     let a0 = ch.solve(rhs);
-    let [timeconst, dampratio] = LIMIT_SOLREF;
-    let timeconst = timeconst.max(2.0 * model.timestep);
-    let dmax = LIMIT_SOLIMP[1];
-    let k = 1.0 / (dmax * dmax * timeconst * timeconst * dampratio * dampratio);
-    let b = 2.0 / (dmax * timeconst);
     for (r, dist, sign) in violated {
         let d = data.independent_dofs[r];
-        let imp = crate::contact::impedance(&LIMIT_SOLIMP, -dist);
+        let joint = &model.joints[model.dof_joint[d]];
+        let [timeconst, dampratio] = joint.limit_solref;
+        // MuJoCo's "refsafe": the time constant is at least two timesteps.
+        let timeconst = timeconst.max(2.0 * model.timestep);
+        let dmax = joint.limit_solimp[1];
+        let k = 1.0 / (dmax * dmax * timeconst * timeconst * dampratio * dampratio);
+        let b = 2.0 / (dmax * timeconst);
+        let imp = crate::contact::impedance(&joint.limit_solimp, -dist);
         let vel = sign * state.qvel[d];
         let a_ref = -b * vel - k * imp * dist;
         let a_inv = inv[(r, r)];

@@ -1,8 +1,9 @@
 //! # sim — the muscle-rally simulator
 //!
 //! Physics only: the ball world (flight, table, net and paddle contacts), the rules of a legal
-//! return, ballistic prediction and the serve generators. Later issues add the musculoskeletal model
-//! (MJCF loader, rigid-body dynamics, muscles) and the arena's episode and rally state machines.
+//! return, ballistic prediction and the serve generators; the musculoskeletal robot (MJCF loader,
+//! kinematics, rigid-body dynamics, MuJoCo's muscles, the grip) and the dual arena. The episode and
+//! rally state machines come with issue 4.
 //!
 //! **Must never**: do I/O, spawn threads, read the clock, or draw a random number the caller did not
 //! seed. Same inputs give bit-identical outputs. Policies, rewards and observations live in `agents`.
@@ -10,13 +11,18 @@
 //! Laid out by stage, as MuJoCo's engine is: [`arena`] (every constant, the presets), [`geometry`]
 //! (signed distances), [`ball`] (flight), [`contact`] (contact laws), [`world`] (the stepper),
 //! [`events`] and [`rules`] (the referee), [`predict`] (drag-free prediction, the return sampler)
-//! and [`serve`] (serve generators on a portable ChaCha RNG).
+//! and [`serve`] (serve generators on a portable ChaCha RNG); for the robot [`mjcf`] (loader) →
+//! [`model`] (immutable description) → [`kinematics`] (frames, tendons) → [`dynamics`] (mass matrix,
+//! bias, actuation, Euler step) with [`muscle`] (MuJoCo's curves), then [`robot`] (grip, side frame),
+//! [`dual`] (two robots and the ball) and [`config`] (`config/arena.toml`).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod arena;
 pub mod ball;
+pub mod config;
 pub mod contact;
+pub mod dual;
 pub mod dynamics;
 pub mod events;
 pub mod geometry;
@@ -26,6 +32,7 @@ pub mod model;
 pub mod muscle;
 pub mod predict;
 pub mod rng;
+pub mod robot;
 pub mod rules;
 pub mod serve;
 pub mod world;

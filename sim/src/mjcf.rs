@@ -624,6 +624,33 @@ impl Compiler {
             Ok(v)
         };
         let reference = conv(a.f64_or("ref", 0.0)?);
+        let limit_solref = a
+            .arr::<2>("solreflimit")?
+            .unwrap_or(crate::dynamics::LIMIT_SOLREF);
+        if limit_solref[0] <= 0.0 || limit_solref[1] <= 0.0 {
+            return Err(e.src.err("<joint> solreflimit: only the standard form (time constant, damping ratio > 0) is supported"));
+        }
+        let limit_solimp = match a.nums("solimplimit")? {
+            None => crate::dynamics::LIMIT_SOLIMP,
+            Some(v) if v.len() == 3 || (v.len() == 5 && v[3] == 0.5 && v[4] == 2.0) => {
+                [v[0], v[1], v[2]]
+            }
+            Some(_) => {
+                return Err(e.src.err(
+                    "<joint> solimplimit: give d0 dwidth width (midpoint 0.5 and power 2 only)",
+                ))
+            }
+        };
+        if !(0.0 < limit_solimp[0]
+            && limit_solimp[0] < 1.0
+            && 0.0 < limit_solimp[1]
+            && limit_solimp[1] < 1.0
+            && limit_solimp[2] > 0.0)
+        {
+            return Err(e
+                .src
+                .err("<joint> solimplimit: need 0 < d0, dwidth < 1 and width > 0"));
+        }
         let joint = Joint {
             name,
             kind,
@@ -636,6 +663,8 @@ impl Compiler {
             stiffness: nonneg("stiffness")?,
             springref: a.f64("springref")?.map(conv).unwrap_or(0.0),
             reference,
+            limit_solref,
+            limit_solimp,
             qpos_adr: self.model.nq,
             dof_adr: self.model.nv,
         };

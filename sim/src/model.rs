@@ -97,6 +97,10 @@ pub struct Joint {
     pub springref: f64,
     /// Reference position: the joint's value in the model's reference configuration (`qpos0`).
     pub reference: f64,
+    /// Soft-limit reference (MuJoCo `solreflimit`: time constant s, damping ratio).
+    pub limit_solref: [f64; 2],
+    /// Soft-limit impedance (MuJoCo `solimplimit`: d0, dwidth, width; midpoint 0.5, power 2).
+    pub limit_solimp: [f64; 3],
     /// First index in `qpos`.
     pub qpos_adr: usize,
     /// First index in `qvel`.

@@ -97,6 +97,9 @@ pub struct BallWorld {
     table: Aabb,
     net: Aabb,
     touching: Touching,
+    /// Impulses the ball received from paddles in the last physics step: (paddle owner, contact
+    /// point, impulse on the ball in N·s). The paddle received the opposite.
+    pub paddle_impulses: Vec<(Side, V3, V3)>,
 }
 
 fn side_index(side: Side) -> usize {
@@ -116,6 +119,7 @@ impl BallWorld {
             table: Aabb::table(),
             net: Aabb::net(),
             touching: Touching::default(),
+            paddle_impulses: Vec::new(),
         }
     }
 
@@ -163,6 +167,7 @@ impl BallWorld {
         self.ball.spin += h * accel.ang;
 
         let mut touched = Touching::default();
+        self.paddle_impulses.clear();
         self.sweep(paddles, h, &mut touched, events);
 
         if soft.is_some() {
@@ -233,8 +238,14 @@ impl BallWorld {
                 self.ball.pos += prox.normal * (-gap + TOUCH_EPS);
             }
             let coeffs = self.coeffs(target);
+            let vel_before = self.ball.vel;
             if contact::apply_impulse(&mut self.ball, &prox.normal, &surface_vel, &coeffs).is_some()
             {
+                if let Target::Paddle(i) = target {
+                    let impulse = (self.ball.vel - vel_before) * arena::BALL_MASS;
+                    self.paddle_impulses
+                        .push((paddles[i].owner, prox.point, impulse));
+                }
                 let kind = match target {
                     Target::Table => ContactKind::Table {
                         feature: prox.feature,

@@ -1,0 +1,102 @@
+//! The arena configuration (`config/arena.toml`): the robot model each side plays with and the grip
+//! constants. Parsing only: the caller reads files. The shipped file and model are compiled in as the
+//! defaults, so a match is reproducible from the simulator's version alone.
+
+use serde::Deserialize;
+
+/// The shipped `config/arena.toml`.
+pub const DEFAULT_ARENA_TOML: &str = include_str!("../../config/arena.toml");
+/// The shipped robot, `config/models/upper_body.xml`.
+pub const DEFAULT_MODEL_XML: &str = include_str!("../../config/models/upper_body.xml");
+
+/// Grip constants (DESIGN §5), as `[grip]` in `config/arena.toml` documents them.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GripParams {
+    /// Body that holds the paddle.
+    pub hand_body: String,
+    /// The paddle's body in the model, welded to the hand at its nominal pose.
+    pub paddle_body: String,
+    /// Muscles whose pull squeezes the handle.
+    pub muscles: Vec<String>,
+    /// Coulomb friction between hand and handle.
+    pub friction: f64,
+    /// Lever arm of the squeeze against twisting, m.
+    pub lever_arm: f64,
+    /// Distance from the nominal pose within which a slipping paddle can be regained, m.
+    pub regain_distance: f64,
+    /// Largest speed of the paddle relative to its nominal pose at which it can be regained, m/s.
+    pub regain_speed: f64,
+    /// Grip capacity needed to regain it, N.
+    pub regain_force: f64,
+    /// Distance from the nominal pose beyond which the paddle is dropped, m.
+    pub drop_distance: f64,
+}
+
+/// Everything in `config/arena.toml`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArenaConfig {
+    /// Robot model file, relative to the configuration file.
+    pub model: String,
+    /// Grip constants.
+    pub grip: GripParams,
+}
+
+impl ArenaConfig {
+    /// Parses and checks a configuration; the error says which field is wrong.
+    pub fn from_toml(text: &str) -> Result<ArenaConfig, String> {
+        let c: ArenaConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+        let g = &c.grip;
+        let positive = [
+            ("grip.friction", g.friction),
+            ("grip.lever_arm", g.lever_arm),
+            ("grip.regain_distance", g.regain_distance),
+            ("grip.regain_speed", g.regain_speed),
+            ("grip.drop_distance", g.drop_distance),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a positive number, got {v}"));
+            }
+        }
+        if !(g.regain_force.is_finite() && g.regain_force >= 0.0) {
+            return Err(format!(
+                "grip.regain_force must be a number ≥ 0, got {}",
+                g.regain_force
+            ));
+        }
+        if g.regain_distance >= g.drop_distance {
+            return Err("grip.regain_distance must be smaller than grip.drop_distance".into());
+        }
+        if g.muscles.is_empty() {
+            return Err("grip.muscles must name at least one muscle".into());
+        }
+        Ok(c)
+    }
+}
+
+impl Default for ArenaConfig {
+    fn default() -> Self {
+        ArenaConfig::from_toml(DEFAULT_ARENA_TOML).expect("the shipped config/arena.toml is valid")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_config_parses_and_bad_values_are_named() {
+        let c = ArenaConfig::default();
+        assert_eq!(c.grip.muscles, ["FDS", "FDP", "FPL"]);
+        let bad = DEFAULT_ARENA_TOML.replace("drop_distance = 0.10", "drop_distance = -1");
+        assert!(ArenaConfig::from_toml(&bad)
+            .unwrap_err()
+            .contains("grip.drop_distance"));
+        let bad = DEFAULT_ARENA_TOML.replace("friction = 1.0", "friction = 1.0\nfrition = 2");
+        assert!(ArenaConfig::from_toml(&bad)
+            .unwrap_err()
+            .contains("frition"));
+    }
+}
