@@ -1,3 +1,4 @@
+//! Times the robot's physics step (used while optimising; `rally bench robot` is the benchmark).
 use sim::dynamics::{step, Data, State};
 use std::path::Path;
 use std::time::Instant;
@@ -12,7 +13,10 @@ fn main() {
     for c in state.ctrl.iter_mut() {
         *c = 0.1;
     }
-    let n = 20000;
+    let n: usize = std::env::args()
+        .nth(1)
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(20000);
     let t = Instant::now();
     for _ in 0..n {
         step(&model, &mut data, &mut state);

@@ -84,10 +84,21 @@ pub struct Data {
     pub actuator_force: Vec<f64>,
     /// Joint accelerations of the last step, nv.
     pub qacc: DVector<f64>,
-    /// Map from the independent velocities to all velocities (nv × nr); identity without couplings.
-    pub coupling_map: DMatrix<f64>,
-    /// Independent degrees of freedom (columns of `coupling_map`).
+    /// The map `T` from independent to all velocities (`q̇ = T·q̇_r`), by column: for each independent
+    /// degree of freedom, the dofs it moves and by how much (1 for itself, `p'(q)` for its dependents).
+    pub coupling_columns: Vec<Vec<(usize, f64)>>,
+    /// Independent degrees of freedom (the columns of `T`).
     pub independent_dofs: Vec<usize>,
+    /// `Ṫ·q̇_r`: the dependents' acceleration at zero independent acceleration (nv).
+    tdot_v: DVector<f64>,
+    /// Generalised force before projection (nv).
+    force: DVector<f64>,
+    /// `Tᵀ(M + h·D)T` (nr × nr).
+    lhs: DMatrix<f64>,
+    /// `Tᵀ·force` (nr).
+    rhs: DVector<f64>,
+    /// Joint damping per dof.
+    damping: Vec<f64>,
     // Scratch.
     body_inertia: Vec<Matrix6<f64>>,
     composite: Vec<Matrix6<f64>>,
@@ -128,10 +139,26 @@ impl Data {
             .filter(|&d| !model.is_dependent(model.dof_joint[d]))
             .collect();
         let nr = independent_dofs.len();
-        let mut coupling_map = DMatrix::zeros(nv, nr);
-        for (r, &d) in independent_dofs.iter().enumerate() {
-            coupling_map[(d, r)] = 1.0;
+        let mut coupling_columns: Vec<Vec<(usize, f64)>> =
+            independent_dofs.iter().map(|&d| vec![(d, 1.0)]).collect();
+        for c in &model.couplings {
+            let ind = model.joints[c.independent].dof_adr;
+            let r = independent_dofs
+                .iter()
+                .position(|&d| d == ind)
+                .expect("independent dof");
+            coupling_columns[r].push((model.joints[c.dependent].dof_adr, 0.0));
         }
+        let damping = (0..nv)
+            .map(|d| {
+                let j = &model.joints[model.dof_joint[d]];
+                if j.kind == JointKind::Free {
+                    0.0
+                } else {
+                    j.damping
+                }
+            })
+            .collect();
         Data {
             kin: Kinematics::new(model),
             ten: TendonKinematics::new(model),
@@ -144,8 +171,13 @@ impl Data {
             actuator_velocity: vec![0.0; nu],
             actuator_force: vec![0.0; nu],
             qacc: DVector::zeros(nv),
-            coupling_map,
+            coupling_columns,
             independent_dofs,
+            tdot_v: DVector::zeros(nv),
+            force: DVector::zeros(nv),
+            lhs: DMatrix::zeros(nr, nr),
+            rhs: DVector::zeros(nr),
+            damping,
             body_inertia: vec![Matrix6::zeros(); nb],
             composite: vec![Matrix6::zeros(); nb],
             cdof: vec![V6::zeros(); nv],
@@ -249,10 +281,7 @@ impl Data {
         }
         for (i, act) in model.actuators.iter().enumerate() {
             self.actuator_velocity[i] = match act.transmission {
-                Transmission::Tendon(t) => {
-                    let row = self.ten.moment.row(t);
-                    (0..model.nv).map(|d| row[d] * qvel[d]).sum()
-                }
+                Transmission::Tendon(t) => self.ten.velocity(t, qvel),
                 Transmission::Joint(j) => qvel[model.joints[j].dof_adr],
             };
         }
@@ -277,9 +306,9 @@ impl Data {
         v + w.cross(p)
     }
 
-    /// The coupling map's derivative term `Ṫ·q̇_r` (nv) and refreshes `coupling_map` at `qpos`.
-    fn couplings(&mut self, model: &Model, qpos: &[f64], qvel: &[f64]) -> DVector<f64> {
-        let mut tdot_v = DVector::zeros(model.nv);
+    /// Refreshes the coupling columns of `T` at `qpos` and `Ṫ·q̇_r` at `qvel`.
+    fn update_couplings(&mut self, model: &Model, qpos: &[f64], qvel: &[f64]) {
+        self.tdot_v.fill(0.0);
         for c in &model.couplings {
             let ind = &model.joints[c.independent];
             let dep = &model.joints[c.dependent];
@@ -289,10 +318,14 @@ impl Data {
                 .iter()
                 .position(|&d| d == ind.dof_adr)
                 .expect("independent dof");
-            self.coupling_map[(dep.dof_adr, r)] = d1;
-            tdot_v[dep.dof_adr] = d2 * qvel[ind.dof_adr] * qvel[ind.dof_adr];
+            if let Some(entry) = self.coupling_columns[r]
+                .iter_mut()
+                .find(|(d, _)| *d == dep.dof_adr)
+            {
+                entry.1 = d1;
+            }
+            self.tdot_v[dep.dof_adr] = d2 * qvel[ind.dof_adr] * qvel[ind.dof_adr];
         }
-        tdot_v
     }
 }
 
@@ -320,7 +353,6 @@ fn actuator_force(model: &Model, i: usize, len: f64, vel: f64, act: f64, ctrl: f
 /// actuator lengths and velocities in `data` and the activations and controls in `state` (MuJoCo's
 /// `mj_fwdActuation`; controls clamped to their ranges).
 pub fn actuate(model: &Model, data: &mut Data, state: &State) {
-    let nv = model.nv;
     data.actuation.fill(0.0);
     for i in 0..model.actuators.len() {
         let a = &model.actuators[i];
@@ -339,7 +371,7 @@ pub fn actuate(model: &Model, data: &mut Data, state: &State) {
         data.actuator_force[i] = f;
         match a.transmission {
             Transmission::Tendon(t) => {
-                for d in 0..nv {
+                for &d in &data.ten.dofs[t] {
                     data.actuation[d] += data.ten.moment[(t, d)] * f;
                 }
             }
@@ -371,45 +403,74 @@ pub fn step_with_force(
 
     actuate(model, data, state);
     // Passive springs and damping.
-    let mut damping = DVector::zeros(nv);
     for joint in &model.joints {
         if joint.kind == JointKind::Free {
             continue;
         }
         let d = joint.dof_adr;
-        damping[d] = joint.damping;
         data.passive[d] = -joint.damping * state.qvel[d]
             - joint.stiffness * (state.qpos[joint.qpos_adr] - joint.springref);
     }
 
-    // Reduced (independent) coordinates.
-    let tdot_v = data.couplings(model, &state.qpos, &state.qvel);
-    let t = &data.coupling_map;
-    let m_r = t.transpose() * &data.mass * t;
-    let d_r = t.transpose() * DMatrix::from_diagonal(&damping) * t;
-    let mut force = &data.actuation + &data.passive - &data.bias - &data.mass * &tdot_v;
-    if let Some(ext) = external {
-        force += ext;
-    }
-    let rhs = t.transpose() * &force;
-
-    // Soft joint limits on independent joints (diagonal approximation of MuJoCo's constraint solve).
-    let mut lhs = &m_r + &d_r * h;
-    let limit_r = limit_forces(model, data, state, &lhs, &rhs);
-    data.limit.fill(0.0);
-    for (r, &d) in data.independent_dofs.iter().enumerate() {
-        data.limit[d] = limit_r[r];
-    }
-    let rhs = rhs + limit_r;
-    let qacc_r = match lhs.clone().cholesky() {
-        Some(ch) => ch.solve(&rhs),
-        None => {
-            lhs.fill_diagonal(1.0);
-            rhs
+    // Reduced (independent) coordinates: (Tᵀ(M + h·D)T)·q̈_r = Tᵀ(τ − c − M·Ṫq̇_r), T sparse.
+    data.update_couplings(model, &state.qpos, &state.qvel);
+    data.force.copy_from(&data.actuation);
+    data.force += &data.passive;
+    data.force -= &data.bias;
+    for c in &model.couplings {
+        let dep = model.joints[c.dependent].dof_adr;
+        let tv = data.tdot_v[dep];
+        if tv != 0.0 {
+            for i in 0..nv {
+                data.force[i] -= data.mass[(i, dep)] * tv;
+            }
         }
+    }
+    if let Some(ext) = external {
+        data.force += ext;
+    }
+    let nr = data.independent_dofs.len();
+    for r in 0..nr {
+        data.rhs[r] = data.coupling_columns[r]
+            .iter()
+            .map(|&(i, a)| a * data.force[i])
+            .sum();
+        for c in 0..=r {
+            let mut v = 0.0;
+            for &(i, a) in &data.coupling_columns[r] {
+                for &(j, b) in &data.coupling_columns[c] {
+                    let damp = if i == j { h * data.damping[i] } else { 0.0 };
+                    v += a * b * (data.mass[(i, j)] + damp);
+                }
+            }
+            data.lhs[(r, c)] = v;
+            data.lhs[(c, r)] = v;
+        }
+    }
+
+    // One factorisation serves the unconstrained solve and the soft joint limits.
+    let qacc_r = match data.lhs.clone().cholesky() {
+        Some(ch) => {
+            let mut qacc_r = ch.solve(&data.rhs);
+            let limit_r = limit_forces(model, data, state, &ch, &qacc_r);
+            data.limit.fill(0.0);
+            if limit_r.iter().any(|f| *f != 0.0) {
+                for (r, &d) in data.independent_dofs.iter().enumerate() {
+                    data.limit[d] = limit_r[r];
+                }
+                qacc_r += ch.solve(&limit_r);
+            }
+            qacc_r
+        }
+        // Not positive definite (a massless moving body): no motion rather than nonsense.
+        None => DVector::zeros(data.independent_dofs.len()),
     };
-    let qacc = t * &qacc_r + &tdot_v;
-    data.qacc.copy_from(&qacc);
+    data.qacc.copy_from(&data.tdot_v);
+    for (r, col) in data.coupling_columns.iter().enumerate() {
+        for &(i, a) in col {
+            data.qacc[i] += a * qacc_r[r];
+        }
+    }
 
     // Integrate independent velocities and positions; dependents follow.
     for (r, &d) in data.independent_dofs.iter().enumerate() {
@@ -465,13 +526,14 @@ pub fn set_dependents(model: &Model, state: &mut State) {
 }
 
 /// Limit forces in independent coordinates: each violated limit is MuJoCo's soft constraint solved on
-/// its own, with the effective inverse inertia `(lhs⁻¹)_rr` of its degree of freedom.
+/// its own, with the effective inverse inertia `(lhs⁻¹)_rr` of its degree of freedom (from the
+/// factorisation `ch` of `lhs`) and the unconstrained acceleration `a0`.
 fn limit_forces(
     model: &Model,
     data: &Data,
     state: &State,
-    lhs: &DMatrix<f64>,
-    rhs: &DVector<f64>,
+    ch: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
+    a0: &DVector<f64>,
 ) -> DVector<f64> {
     let nr = data.independent_dofs.len();
     let mut out = DVector::zeros(nr);
@@ -495,11 +557,6 @@ fn limit_forces(
     if violated.is_empty() {
         return out;
     }
-    let Some(ch) = lhs.clone().cholesky() else {
-        return out;
-    };
-    let inv = ch.inverse();
-    let a0 = ch.solve(rhs);
     for (r, dist, sign) in violated {
         let d = data.independent_dofs[r];
         let joint = &model.joints[model.dof_joint[d]];
@@ -512,7 +569,13 @@ fn limit_forces(
         let imp = crate::contact::impedance(&joint.limit_solimp, -dist);
         let vel = sign * state.qvel[d];
         let a_ref = -b * vel - k * imp * dist;
-        let a_inv = inv[(r, r)];
+        // (lhs⁻¹)_rr = |L⁻¹·e_r|².
+        let mut e = DVector::zeros(a0.len());
+        e[r] = 1.0;
+        let a_inv = ch
+            .l_dirty()
+            .solve_lower_triangular(&e)
+            .map_or(0.0, |x| x.norm_squared());
         let r_reg = (1.0 - imp) / imp * a_inv;
         let a_unc = sign * a0[r];
         if a_ref > a_unc {

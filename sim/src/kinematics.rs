@@ -37,14 +37,7 @@ impl Kinematics {
     /// A workspace for `model`, at its reference configuration.
     pub fn new(model: &Model) -> Kinematics {
         let nb = model.bodies.len();
-        let mut body_last_dof = vec![None; nb];
-        for b in 1..nb {
-            let body = &model.bodies[b];
-            let own = (body.first_joint..body.first_joint + body.joint_count)
-                .last()
-                .map(|j| model.joints[j].dof_adr + model.joints[j].kind.nv() - 1);
-            body_last_dof[b] = own.or(body_last_dof[body.parent.expect("non-world body")]);
-        }
+        let body_last_dof = body_last_dofs(model);
         let mut k = Kinematics {
             xpos: vec![V3::zeros(); nb],
             xquat: vec![UnitQuaternion::identity(); nb],
@@ -154,6 +147,36 @@ impl Kinematics {
     }
 }
 
+/// For each body, the last degree of freedom on its path to the root (`None` for the world and bodies
+/// welded to it).
+pub fn body_last_dofs(model: &Model) -> Vec<Option<usize>> {
+    let mut out = vec![None; model.bodies.len()];
+    for b in 1..model.bodies.len() {
+        let body = &model.bodies[b];
+        let own = (body.first_joint..body.first_joint + body.joint_count)
+            .last()
+            .map(|j| model.joints[j].dof_adr + model.joints[j].kind.nv() - 1);
+        out[b] = own.or(out[body.parent.expect("non-world body")]);
+    }
+    out
+}
+
+/// The degrees of freedom that move `body`, from the body towards the root.
+pub fn dof_chain(model: &Model, last: &[Option<usize>], body: usize) -> Vec<usize> {
+    std::iter::successors(last[body], |&d| model.dof_parent[d]).collect()
+}
+
+/// One straight piece of a tendon's path, with the degrees of freedom that can change its length:
+/// those that move one end and not the other (a dof moving both ends moves the segment rigidly).
+#[derive(Debug, Clone)]
+struct Segment {
+    tendon: usize,
+    s0: usize,
+    s1: usize,
+    dofs0: Vec<usize>,
+    dofs1: Vec<usize>,
+}
+
 /// Length of every tendon and its moment arms `∂l/∂q` per degree of freedom (MuJoCo's `ten_J`).
 #[derive(Debug, Clone)]
 pub struct TendonKinematics {
@@ -161,45 +184,79 @@ pub struct TendonKinematics {
     pub length: Vec<f64>,
     /// Moment arms, ntendon × nv (row per tendon), m or m/m.
     pub moment: DMatrix<f64>,
+    /// For each tendon, the degrees of freedom where its moment arm can be non-zero.
+    pub dofs: Vec<Vec<usize>>,
+    segments: Vec<Segment>,
 }
 
 impl TendonKinematics {
-    /// Zeroed storage for `model`.
+    /// Zeroed storage for `model`, and each segment's degrees of freedom.
     pub fn new(model: &Model) -> TendonKinematics {
+        let last = body_last_dofs(model);
+        let mut segments = Vec::new();
+        let mut dofs = vec![Vec::new(); model.tendons.len()];
+        for (t, tendon) in model.tendons.iter().enumerate() {
+            for w in tendon.sites.windows(2) {
+                let (s0, s1) = (w[0], w[1]);
+                let c0 = dof_chain(model, &last, model.sites[s0].body);
+                let c1 = dof_chain(model, &last, model.sites[s1].body);
+                let dofs0: Vec<usize> = c0.iter().copied().filter(|d| !c1.contains(d)).collect();
+                let dofs1: Vec<usize> = c1.iter().copied().filter(|d| !c0.contains(d)).collect();
+                for d in dofs0.iter().chain(&dofs1) {
+                    if !dofs[t].contains(d) {
+                        dofs[t].push(*d);
+                    }
+                }
+                segments.push(Segment {
+                    tendon: t,
+                    s0,
+                    s1,
+                    dofs0,
+                    dofs1,
+                });
+            }
+            dofs[t].sort_unstable();
+        }
         TendonKinematics {
             length: vec![0.0; model.tendons.len()],
             moment: DMatrix::zeros(model.tendons.len(), model.nv),
+            dofs,
+            segments,
         }
     }
 
     /// Recomputes lengths and moment arms from the site positions in `kin`.
-    pub fn update(&mut self, model: &Model, kin: &Kinematics) {
-        self.moment.fill(0.0);
-        for (t, tendon) in model.tendons.iter().enumerate() {
-            let mut length = 0.0;
-            for w in tendon.sites.windows(2) {
-                let (s0, s1) = (w[0], w[1]);
-                let (p0, p1) = (kin.site_pos[s0], kin.site_pos[s1]);
-                let seg = p1 - p0;
-                let l = seg.norm();
-                length += l;
-                if l < 1e-12 {
-                    continue;
-                }
-                let u = seg / l;
-                let (b0, b1) = (model.sites[s0].body, model.sites[s1].body);
-                if b0 == b1 {
-                    continue;
-                }
-                for d in kin.chain(model, b1) {
-                    self.moment[(t, d)] += u.dot(&kin.point_velocity(d, &p1));
-                }
-                for d in kin.chain(model, b0) {
-                    self.moment[(t, d)] -= u.dot(&kin.point_velocity(d, &p0));
-                }
+    pub fn update(&mut self, _model: &Model, kin: &Kinematics) {
+        for (t, dofs) in self.dofs.iter().enumerate() {
+            self.length[t] = 0.0;
+            for &d in dofs {
+                self.moment[(t, d)] = 0.0;
             }
-            self.length[t] = length;
         }
+        for seg in &self.segments {
+            let (p0, p1) = (kin.site_pos[seg.s0], kin.site_pos[seg.s1]);
+            let v = p1 - p0;
+            let l = v.norm();
+            self.length[seg.tendon] += l;
+            if l < 1e-12 {
+                continue;
+            }
+            let u = v / l;
+            for &d in &seg.dofs1 {
+                self.moment[(seg.tendon, d)] += u.dot(&kin.point_velocity(d, &p1));
+            }
+            for &d in &seg.dofs0 {
+                self.moment[(seg.tendon, d)] -= u.dot(&kin.point_velocity(d, &p0));
+            }
+        }
+    }
+
+    /// Velocity of tendon `t` for joint velocities `qvel`.
+    pub fn velocity(&self, t: usize, qvel: &[f64]) -> f64 {
+        self.dofs[t]
+            .iter()
+            .map(|&d| self.moment[(t, d)] * qvel[d])
+            .sum()
     }
 }
 

@@ -152,9 +152,10 @@ fn parse_tree(
         message: format!("malformed XML: {e}"),
     })?;
     let root = doc.root_element();
+    let lines = LineIndex::new(text);
     let src = Src {
         file: file.clone(),
-        line: doc.text_pos_at(root.range().start).row,
+        line: lines.line(root.range().start),
     };
     if root.tag_name().name() != "mujoco" {
         return Err(src.err(format!(
@@ -162,11 +163,29 @@ fn parse_tree(
             root.tag_name().name()
         )));
     }
-    convert(&doc, root, &file, path, read, depth)
+    convert(&lines, root, &file, path, read, depth)
+}
+
+/// Byte offset → 1-based line, by binary search over the line starts (roxmltree's own lookup scans
+/// the text from the start each time).
+struct LineIndex(Vec<usize>);
+
+impl LineIndex {
+    fn new(text: &str) -> LineIndex {
+        LineIndex(
+            std::iter::once(0)
+                .chain(text.match_indices('\n').map(|(i, _)| i + 1))
+                .collect(),
+        )
+    }
+
+    fn line(&self, offset: usize) -> u32 {
+        self.0.partition_point(|&start| start <= offset) as u32
+    }
 }
 
 fn convert(
-    doc: &roxmltree::Document,
+    lines: &LineIndex,
     node: roxmltree::Node,
     file: &Rc<str>,
     path: &Path,
@@ -175,14 +194,14 @@ fn convert(
 ) -> Result<Elem> {
     let src = Src {
         file: file.clone(),
-        line: doc.text_pos_at(node.range().start).row,
+        line: lines.line(node.range().start),
     };
     let mut children = Vec::new();
     for child in node.children().filter(|n| n.is_element()) {
         if child.tag_name().name() == "include" {
             let csrc = Src {
                 file: file.clone(),
-                line: doc.text_pos_at(child.range().start).row,
+                line: lines.line(child.range().start),
             };
             let Some(f) = child.attribute("file") else {
                 return Err(csrc.err("<include> needs a 'file' attribute"));
@@ -197,7 +216,7 @@ fn convert(
             let included = read_tree(&target, read, depth + 1, Some(&csrc))?;
             children.extend(included.children);
         } else {
-            children.push(convert(doc, child, file, path, read, depth)?);
+            children.push(convert(lines, child, file, path, read, depth)?);
         }
     }
     Ok(Elem {
