@@ -24,12 +24,15 @@ pub enum Target {
     /// Ball-world physics steps per second, single thread: ball, table, net and one moving paddle,
     /// P2 serves of 300 control steps each.
     Ball,
+    /// Musculoskeletal physics steps per second, single thread: one robot (dynamics, 75 muscles,
+    /// grip), and the dual arena (two robots and the ball), from "ready" with every muscle at 0.1.
+    Robot,
 }
 
 /// Arguments of `rally bench`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  rally bench ball --mujoco   (needs `pip install mujoco`; see tools/bench_ball.py)"
+    after_help = "Examples:\n  rally bench ball --mujoco    (tools/bench_ball.py times MuJoCo; needs `pip install mujoco numpy`)\n  rally bench robot --mujoco   (tools/bench_robot.py)"
 )]
 pub struct BenchArgs {
     /// What to measure.
@@ -82,8 +85,73 @@ pub fn ball_steps_per_second(seconds: f64) -> (f64, u64) {
     (steps as f64 / start.elapsed().as_secs_f64(), steps)
 }
 
-fn mujoco_steps_per_second(python: &PathBuf, seconds: f64) -> anyhow::Result<(f64, String)> {
-    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tools/bench_ball.py");
+/// Physics steps of a robot between resets, as `tools/bench_robot.py` does.
+const ROBOT_STEPS_PER_RESET: usize = 2000;
+
+fn robot_model() -> anyhow::Result<std::sync::Arc<sim::model::Model>> {
+    let model = sim::mjcf::parse_str(
+        sim::config::DEFAULT_MODEL_XML,
+        "config/models/upper_body.xml",
+    )?;
+    Ok(std::sync::Arc::new(model))
+}
+
+/// Puts a robot at "ready" with every muscle's control and activation at 0.1.
+fn ready(robot: &mut sim::robot::Robot, model: &sim::model::Model) {
+    let key = model
+        .keyframes
+        .iter()
+        .find(|k| k.name == "ready")
+        .map(|k| k.qpos.clone());
+    robot.reset(key.as_deref());
+    for (i, a) in model.actuators.iter().enumerate() {
+        if a.muscle().is_some() {
+            robot.state.ctrl[i] = 0.1;
+            robot.state.act[i] = 0.1;
+        }
+    }
+}
+
+/// (one robot, dual arena) physics steps per second.
+pub fn robot_steps_per_second(seconds: f64) -> anyhow::Result<(f64, f64)> {
+    let model = robot_model()?;
+    let config = sim::config::ArenaConfig::default();
+    let budget = Duration::from_secs_f64(seconds);
+    let mut robot =
+        sim::robot::Robot::new(model.clone(), &config.grip, Side::A).map_err(anyhow::Error::msg)?;
+    let start = Instant::now();
+    let mut steps = 0usize;
+    while start.elapsed() < budget {
+        ready(&mut robot, &model);
+        for _ in 0..ROBOT_STEPS_PER_RESET {
+            robot.physics_step();
+        }
+        steps += ROBOT_STEPS_PER_RESET;
+    }
+    let single = steps as f64 / start.elapsed().as_secs_f64();
+
+    let ball = sim::BallState::new(Vector3::new(-1.2, -0.45, 1.45), Vector3::new(5.6, 1.6, 0.1));
+    let mut arena = sim::dual::DualArena::new(model.clone(), &config, MYOCHALLENGE, ball)
+        .map_err(anyhow::Error::msg)?;
+    let mut events = Vec::new();
+    let start = Instant::now();
+    let mut steps = 0usize;
+    while start.elapsed() < budget {
+        for r in arena.robots.iter_mut() {
+            ready(r, &model);
+        }
+        arena.world = BallWorld::new(MYOCHALLENGE, ball);
+        for _ in 0..ROBOT_STEPS_PER_RESET {
+            events.clear();
+            arena.physics_step(&mut events);
+        }
+        steps += ROBOT_STEPS_PER_RESET;
+    }
+    Ok((single, steps as f64 / start.elapsed().as_secs_f64()))
+}
+
+fn run_python(python: &PathBuf, script: &str, seconds: f64) -> anyhow::Result<serde_json::Value> {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(script);
     let out = Command::new(python)
         .arg(&script)
         .arg("--seconds")
@@ -97,8 +165,11 @@ fn mujoco_steps_per_second(python: &PathBuf, seconds: f64) -> anyhow::Result<(f6
             String::from_utf8_lossy(&out.stderr).trim()
         ));
     }
-    let v: serde_json::Value =
-        serde_json::from_slice(&out.stdout).context("reading the MuJoCo timing")?;
+    serde_json::from_slice(&out.stdout).context("reading the MuJoCo timing")
+}
+
+fn mujoco_steps_per_second(python: &PathBuf, seconds: f64) -> anyhow::Result<(f64, String)> {
+    let v = run_python(python, "tools/bench_ball.py", seconds)?;
     let rate = v["steps_per_second"]
         .as_f64()
         .ok_or_else(|| anyhow!("no steps_per_second in {v}"))?;
@@ -137,6 +208,52 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
                 if let (Some((m, version)), Some(r)) = (&mujoco, ratio) {
                     println!("  MuJoCo {version:<6} {m:>12.0} steps/s  (ball-only reference scene, mj_step nstep)");
                     println!("  ratio         {r:>12.1}x");
+                }
+            }
+            Ok(())
+        }
+        Target::Robot => {
+            let mujoco = if args.mujoco {
+                Some(run_python(
+                    &args.python,
+                    "tools/bench_robot.py",
+                    args.seconds,
+                )?)
+            } else {
+                None
+            };
+            let (single, dual) = robot_steps_per_second(args.seconds)?;
+            let mj = |key: &str| mujoco.as_ref().and_then(|m| m[key].as_f64());
+            let (mj_single, mj_dual) = (mj("single_steps_per_second"), mj("dual_steps_per_second"));
+            if args.json {
+                println!(
+                    "{}",
+                    json!({
+                        "target": "robot",
+                        "single_steps_per_second": single,
+                        "dual_steps_per_second": dual,
+                        "mujoco_single_steps_per_second": mj_single,
+                        "mujoco_dual_steps_per_second": mj_dual,
+                        "mujoco_version": mujoco.as_ref().map(|m| m["mujoco_version"].clone()),
+                        "ratio_single": mj_single.map(|m| single / m),
+                        "ratio_dual": mj_dual.map(|m| dual / m),
+                    })
+                );
+            } else {
+                println!("musculoskeletal robot (config/models/upper_body.xml: 25 DoF, 75 muscles), single thread:");
+                println!("  one robot     muscle-rally {single:>9.0} steps/s");
+                if let Some(m) = mj_single {
+                    println!(
+                        "                MuJoCo       {m:>9.0} steps/s   ratio {:.1}x",
+                        single / m
+                    );
+                }
+                println!("  dual arena    muscle-rally {dual:>9.0} steps/s");
+                if let Some(m) = mj_dual {
+                    println!(
+                        "                MuJoCo       {m:>9.0} steps/s   ratio {:.1}x",
+                        dual / m
+                    );
                 }
             }
             Ok(())
