@@ -98,9 +98,11 @@ def position_record(m, d):
     }
 
 
-def motion(m, d, start_qpos, ctrl, steps):
+def motion(m, d, start_qpos, ctrl, steps, start_qvel=None):
     mujoco.mj_resetData(m, d)
     d.qpos[:] = start_qpos
+    if start_qvel is not None:
+        d.qvel[:] = start_qvel
     d.ctrl[:] = ctrl
     qpos, qvel, act = [], [], []
     for _ in range(steps):
@@ -108,7 +110,9 @@ def motion(m, d, start_qpos, ctrl, steps):
         qpos.append(d.qpos.tolist())
         qvel.append(d.qvel.tolist())
         act.append(d.act.tolist())
-    return {"start_qpos": list(map(float, start_qpos)), "ctrl": list(map(float, ctrl)), "qpos": qpos, "qvel": qvel, "act": act}
+    start_qvel = np.zeros(m.nv) if start_qvel is None else start_qvel
+    return {"start_qpos": list(map(float, start_qpos)), "start_qvel": list(map(float, start_qvel)),
+            "ctrl": list(map(float, ctrl)), "qpos": qpos, "qvel": qvel, "act": act}
 
 
 def limit_clearance(m, qpos_rows):
@@ -124,7 +128,7 @@ def limit_clearance(m, qpos_rows):
     return worst
 
 
-def clear_motion(m, d, start, ctrl_for, steps, clearance, rng, coup, tries=300):
+def clear_motion(m, d, start, ctrl_for, steps, clearance, rng, coup, tries=300, start_qvel=None):
     """The first motion, from `start` perturbed, that stays `clearance` away from every joint limit."""
     best = None
     for attempt in range(tries):
@@ -139,7 +143,7 @@ def clear_motion(m, d, start, ctrl_for, steps, clearance, rng, coup, tries=300):
                         s[adr] = np.clip(s[adr], lo + 2 * clearance, hi - 2 * clearance)
             apply_couplings(m, s, coup)
         ctrl = ctrl_for(s, attempt)
-        rec = motion(m, d, s, ctrl, steps)
+        rec = motion(m, d, s, ctrl, steps, start_qvel)
         c = limit_clearance(m, [s] + rec["qpos"])
         rec["limit_clearance"] = c
         if c >= clearance:
@@ -178,6 +182,7 @@ def main():
         configs.append(position_record(m, d))
 
     start = m.key_qpos[0].copy() if m.nkey > 0 else m.qpos0.copy()
+    start_qvel = m.key_qvel[0].copy() if m.nkey > 0 else np.zeros(m.nv)
     apply_couplings(m, start, coup)
     ctrl_rng = np.random.default_rng(args.seed + 1)
     motion_rng = np.random.default_rng(args.seed + 2)
@@ -216,8 +221,10 @@ def main():
     hang = key("hang", start)
     act_start = key(args.actuated_key, start)
     motions = {
-        "passive": clear_motion(m, d, hang, lambda s, a: servo_targets(s), args.steps, args.clearance, motion_rng, coup),
-        "actuated": clear_motion(m, d, act_start, actuated_ctrl, args.steps, args.clearance, motion_rng, coup),
+        "passive": clear_motion(m, d, hang, lambda s, a: servo_targets(s), args.steps, args.clearance, motion_rng, coup,
+                                start_qvel=start_qvel if hang is start else None),
+        "actuated": clear_motion(m, d, act_start, actuated_ctrl, args.steps, args.clearance, motion_rng, coup,
+                                 start_qvel=start_qvel if act_start is start else None),
     }
 
     fixture = {

@@ -16,3 +16,4 @@ models=sim/tests/fixtures/models
 # muscles quiet (they would close the fingers onto their joint limit within the 0.5 s).
 "$py" tools/mujoco_crosscheck.py config/models/upper_body.xml "$out/upper_body.json" \
   --ctrl-range 0.02 0.15 --actuated-key hang --quiet FDS,FDP,FPL,EDC
+"$py" tools/mujoco_crosscheck.py "$models/free_body.xml" "$out/free_body.json"

@@ -259,6 +259,22 @@ impl Data {
             for j in body.first_joint..body.first_joint + body.joint_count {
                 let joint = &model.joints[j];
                 let dofs = joint.dof_adr..joint.dof_adr + joint.kind.nv();
+                if joint.kind == JointKind::Free {
+                    // As MuJoCo: the translations move the frame without turning it (no ċdof), and the
+                    // three rotations are one angular velocity, so each sees the same velocity.
+                    let d0 = joint.dof_adr;
+                    for d in d0..d0 + 3 {
+                        self.cdof_dot[d] = V6::zeros();
+                        v += self.cdof[d] * qvel[d];
+                    }
+                    let v_rot = v;
+                    for d in d0 + 3..d0 + 6 {
+                        self.cdof_dot[d] = cross_motion(&v_rot, &self.cdof[d]);
+                        a += self.cdof_dot[d] * qvel[d];
+                        v += self.cdof[d] * qvel[d];
+                    }
+                    continue;
+                }
                 for (d, &qd) in dofs.clone().zip(&qvel[dofs]) {
                     self.cdof_dot[d] = cross_motion(&v, &self.cdof[d]);
                     a += self.cdof_dot[d] * qd;

@@ -1176,7 +1176,7 @@ impl Compiler {
             if k.name != "key" {
                 return Err(k.unsupported("keyframe"));
             }
-            k.check_attrs(&["name", "qpos"])?;
+            k.check_attrs(&["name", "qpos", "qvel"])?;
             let a = Attrs {
                 elem: k,
                 defaults: None,
@@ -1192,9 +1192,21 @@ impl Compiler {
                 }
                 None => self.model.qpos0.clone(),
             };
+            let qvel = match a.nums("qvel")? {
+                Some(v) if v.len() == self.model.nv => v,
+                Some(v) => {
+                    return Err(k.src.err(format!(
+                        "<key> qvel: {} numbers for a model with nv = {}",
+                        v.len(),
+                        self.model.nv
+                    )))
+                }
+                None => vec![0.0; self.model.nv],
+            };
             self.model.keyframes.push(Keyframe {
                 name: k.attr("name").unwrap_or("").to_string(),
                 qpos,
+                qvel,
             });
         }
         Ok(())
@@ -1447,13 +1459,17 @@ fn compile(root: &Elem) -> Result<Model> {
     }
     for e in root.children.iter().filter(|e| e.name == "worldbody") {
         e.check_attrs(&[])?;
+        // As MuJoCo orders them: the world's own geoms and sites first, then the bodies.
         for child in &e.children {
             match child.name.as_str() {
-                "body" => c.body(child, 0, None)?,
+                "body" => {}
                 "geom" => c.geom(child, 0, None)?,
                 "site" => c.site(child, 0, None)?,
                 _ => return Err(child.unsupported("worldbody")),
             }
+        }
+        for child in e.children.iter().filter(|c| c.name == "body") {
+            c.body(child, 0, None)?;
         }
     }
     c.finish_inertia()?;

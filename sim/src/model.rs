@@ -261,6 +261,8 @@ pub struct Keyframe {
     pub name: String,
     /// Joint positions (length `nq`).
     pub qpos: Vec<f64>,
+    /// Joint velocities (length `nv`; zero when the key gives none).
+    pub qvel: Vec<f64>,
 }
 
 /// A compiled model.
