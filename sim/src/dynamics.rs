@@ -263,15 +263,15 @@ impl Data {
                     // As MuJoCo: the translations move the frame without turning it (no ċdof), and the
                     // three rotations are one angular velocity, so each sees the same velocity.
                     let d0 = joint.dof_adr;
-                    for d in d0..d0 + 3 {
+                    for (d, &qd) in (d0..d0 + 3).zip(&qvel[d0..d0 + 3]) {
                         self.cdof_dot[d] = V6::zeros();
-                        v += self.cdof[d] * qvel[d];
+                        v += self.cdof[d] * qd;
                     }
                     let v_rot = v;
-                    for d in d0 + 3..d0 + 6 {
+                    for (d, &qd) in (d0 + 3..d0 + 6).zip(&qvel[d0 + 3..d0 + 6]) {
                         self.cdof_dot[d] = cross_motion(&v_rot, &self.cdof[d]);
-                        a += self.cdof_dot[d] * qvel[d];
-                        v += self.cdof[d] * qvel[d];
+                        a += self.cdof_dot[d] * qd;
+                        v += self.cdof[d] * qd;
                     }
                     continue;
                 }
