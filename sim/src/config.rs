@@ -31,6 +31,18 @@ pub struct GripParams {
     pub regain_force: f64,
     /// Distance from the nominal pose beyond which the paddle is dropped, m.
     pub drop_distance: f64,
+    /// Activation of the grip muscles at the start of an episode or rally.
+    pub initial_activation: f64,
+}
+
+/// Rally limits.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RallyParams {
+    /// Legal returns after which a rally ends as CAPPED.
+    pub cap: u32,
+    /// Simulated seconds after which a rally ends as CAPPED.
+    pub max_seconds: f64,
 }
 
 /// Everything in `config/arena.toml`.
@@ -41,6 +53,8 @@ pub struct ArenaConfig {
     pub model: String,
     /// Grip constants.
     pub grip: GripParams,
+    /// Rally limits.
+    pub rally: RallyParams,
 }
 
 impl ArenaConfig {
@@ -68,6 +82,15 @@ impl ArenaConfig {
         }
         if g.regain_distance >= g.drop_distance {
             return Err("grip.regain_distance must be smaller than grip.drop_distance".into());
+        }
+        if !(0.0..=1.0).contains(&g.initial_activation) {
+            return Err(format!(
+                "grip.initial_activation must be in [0, 1], got {}",
+                g.initial_activation
+            ));
+        }
+        if c.rally.cap == 0 || !(c.rally.max_seconds.is_finite() && c.rally.max_seconds > 0.0) {
+            return Err("rally.cap must be at least 1 and rally.max_seconds positive".into());
         }
         if g.muscles.is_empty() {
             return Err("grip.muscles must name at least one muscle".into());

@@ -24,6 +24,7 @@ pub mod config;
 pub mod contact;
 pub mod dual;
 pub mod dynamics;
+pub mod episode;
 pub mod events;
 pub mod geometry;
 pub mod kinematics;

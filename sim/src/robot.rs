@@ -224,13 +224,18 @@ impl Robot {
         }
     }
 
-    /// Back to `qpos` (or the reference configuration) at rest, controls and activations zero, paddle
-    /// in the hand.
+    /// Back to `qpos` (or the reference configuration) at rest, paddle in the hand: every muscle
+    /// relaxed except the grip muscles, which squeeze at `grip.initial_activation` (control and
+    /// activation).
     pub fn reset(&mut self, qpos: Option<&[f64]>) {
         let model = self.held_model.clone();
         self.state = State::new(&model);
         if let Some(q) = qpos {
             self.state.set_qpos(&model, q);
+        }
+        for &a in &self.grip_muscles {
+            self.state.act[a] = self.params.initial_activation;
+            self.state.ctrl[a] = self.params.initial_activation;
         }
         self.phase = GripPhase::Held;
         self.prev_velocity = None;
@@ -257,6 +262,16 @@ impl Robot {
             lin_vel: self.data.point_velocity(h, &pose.pos),
             ang_vel: self.data.angular_velocity(h),
         }
+    }
+
+    /// The grip muscles' actuator indices.
+    pub fn grip_muscles(&self) -> &[usize] {
+        &self.grip_muscles
+    }
+
+    /// The shared model with the paddle in the hand.
+    pub fn held_model(&self) -> &Arc<Model> {
+        &self.held_model
     }
 
     /// Grip capacity, N: friction times the summed pull of the grip muscles.

@@ -1,0 +1,382 @@
+//! The paper's two environments as state machines over the physics (DESIGN §4, paper §V-A):
+//!
+//! - [`SingleServe`]: a MyoChallenge serve (P0/P1/P2) to robot A; 300 control steps at 100 Hz, ending
+//!   early on the rules — a legal return (success), or the first failure.
+//! - [`Rally`]: the dual arena; the paper's heuristic serve from the server's hitting plane, then
+//!   play until the first failure, or CAPPED after `rally.cap` legal returns or `rally.max_seconds`.
+//!   Every incoming ball's crossing of its receiver's hitting plane is recorded for the drift
+//!   statistics (DESIGN §7).
+//!
+//! Whoever drives the robots sets their controls before each [`SingleServe::step`] / [`Rally::step`].
+//! No I/O; randomness only from the caller's [`Rng`].
+
+use std::sync::Arc;
+
+use nalgebra::Vector3;
+
+use crate::arena::{self, Preset, Side};
+use crate::ball::BallState;
+use crate::config::{ArenaConfig, RallyParams};
+use crate::dual::DualArena;
+use crate::events::{ContactEvent, ContactKind};
+use crate::model::Model;
+use crate::predict::{self, BounceModel};
+use crate::rng::Rng;
+use crate::robot::{GripEvent, Robot};
+use crate::rules::{Call, Failure, Referee};
+use crate::serve::{self, Serve, ServeKind};
+use crate::world::BallWorld;
+
+type V3 = Vector3<f64>;
+
+/// What one control step produced.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StepReport {
+    /// Contacts that began.
+    pub events: Vec<ContactEvent>,
+    /// The referee's calls.
+    pub calls: Vec<Call>,
+    /// Grip changes, by side.
+    pub grip: Vec<(Side, GripEvent)>,
+    /// Whether the episode or rally is over.
+    pub done: bool,
+}
+
+/// Feeds a physics step's events, the ball's height and grip changes to the referee.
+fn judge(
+    referee: &mut Referee,
+    events: &[ContactEvent],
+    t: f64,
+    z: f64,
+    grip: &[(Side, GripEvent)],
+    calls: &mut Vec<Call>,
+) {
+    for e in events {
+        calls.extend(referee.on_contact(e));
+    }
+    calls.extend(referee.on_ball_height(t, z));
+    for (side, g) in grip {
+        if *g == GripEvent::Dropped {
+            calls.extend(referee.report(*side, Failure::DroppedPaddle, t));
+        }
+    }
+}
+
+/// The start pose of a robot: the model's "ready" keyframe if it has one.
+pub fn ready_pose(model: &Model) -> Option<Vec<f64>> {
+    model
+        .keyframes
+        .iter()
+        .find(|k| k.name == "ready")
+        .map(|k| k.qpos.clone())
+}
+
+/// MyoChallenge's single-serve episode for robot A.
+#[derive(Debug, Clone)]
+pub struct SingleServe {
+    /// The robot (side A).
+    pub robot: Robot,
+    /// The ball world.
+    pub world: BallWorld,
+    /// Judges the serve and the return.
+    pub referee: Referee,
+    /// The serve of this episode.
+    pub serve: Serve,
+    /// Control steps taken.
+    pub steps: usize,
+    /// Episode length in control steps.
+    pub max_steps: usize,
+    /// Whether the robot touched the ball.
+    pub hit: bool,
+    /// Whether its return was legal.
+    pub success: bool,
+    /// Whether the episode is over.
+    pub done: bool,
+}
+
+impl SingleServe {
+    /// An episode environment (call [`SingleServe::reset`] before stepping).
+    pub fn new(
+        model: Arc<Model>,
+        config: &ArenaConfig,
+        preset: Preset,
+    ) -> Result<SingleServe, String> {
+        let robot = Robot::new(model, &config.grip, Side::A)?;
+        let ball = BallState::new(V3::new(0.0, 0.0, 2.0), V3::zeros());
+        Ok(SingleServe {
+            robot,
+            world: BallWorld::new(preset, ball),
+            referee: Referee::new(Side::B),
+            serve: serve::generate(
+                ServeKind::P0,
+                &mut Rng::seeded(0),
+                &BounceModel::for_table(&preset.table),
+            ),
+            steps: 0,
+            max_steps: arena::EPISODE_STEPS,
+            hit: false,
+            success: false,
+            done: false,
+        })
+    }
+
+    /// A new episode: the robot at `qpos` (default: "ready"), a serve of `kind` drawn from `rng`.
+    pub fn reset(&mut self, kind: ServeKind, rng: &mut Rng, qpos: Option<&[f64]>) {
+        let ready = ready_pose(self.robot.held_model());
+        self.robot.reset(qpos.or(ready.as_deref()));
+        let preset = self.world.preset;
+        self.serve = serve::generate(kind, rng, &BounceModel::for_table(&preset.table));
+        self.world = BallWorld::new(preset, self.serve.ball);
+        self.referee = Referee::new(self.serve.server);
+        self.steps = 0;
+        self.hit = false;
+        self.success = false;
+        self.done = false;
+    }
+
+    /// One control step with the controls the caller set on `robot.state.ctrl`.
+    pub fn step(&mut self) -> StepReport {
+        let mut report = StepReport::default();
+        if self.done {
+            report.done = true;
+            return report;
+        }
+        for _ in 0..arena::SUBSTEPS {
+            let grip: Vec<(Side, GripEvent)> = self
+                .robot
+                .physics_step()
+                .map(|g| (Side::A, g))
+                .into_iter()
+                .collect();
+            let mut events = Vec::new();
+            self.world
+                .physics_step(&[self.robot.ball_paddle()], &mut events);
+            for (_, point, impulse) in self.world.paddle_impulses.clone() {
+                self.robot.receive_ball_impulse(&point, &impulse);
+            }
+            judge(
+                &mut self.referee,
+                &events,
+                self.world.time,
+                self.world.ball.pos.z,
+                &grip,
+                &mut report.calls,
+            );
+            report.events.extend(events);
+            report.grip.extend(grip);
+        }
+        self.steps += 1;
+        for call in &report.calls {
+            match call {
+                Call::Hit { side: Side::A, .. } => self.hit = true,
+                Call::LegalReturn {
+                    hitter: Side::A, ..
+                } => self.success = true,
+                _ => {}
+            }
+        }
+        // MyoChallenge's hit rate counts any paddle contact, legal or not.
+        if report
+            .events
+            .iter()
+            .any(|e| e.kind == ContactKind::Paddle { owner: Side::A })
+        {
+            self.hit = true;
+        }
+        self.done = self.success || self.referee.end().is_some() || self.steps >= self.max_steps;
+        report.done = self.done;
+        report
+    }
+
+    /// The policy produced NaN or infinite actions: the episode ends with INVALID_ACTION.
+    pub fn invalid_action(&mut self) {
+        self.referee
+            .report(Side::A, Failure::InvalidAction, self.world.time);
+        self.done = true;
+    }
+}
+
+/// Where an incoming ball met (or would have met) its receiver's hitting plane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Crossing {
+    /// The side receiving the ball.
+    pub receiver: Side,
+    /// 0 for the serve, then 1, 2, … for each return.
+    pub exchange: u32,
+    /// Receiver-frame lateral position, m (DESIGN §3).
+    pub y_r: f64,
+    /// Height, m.
+    pub z: f64,
+    /// Inside the serve box.
+    pub in_box: bool,
+    /// Extrapolated from the flight before the receiver hit the ball early (not measured).
+    pub extrapolated: bool,
+    /// Time, s.
+    pub t: f64,
+}
+
+/// The incoming ball being watched for its plane crossing.
+#[derive(Debug, Clone, Copy)]
+struct Watch {
+    receiver: Side,
+    exchange: u32,
+}
+
+/// A dual-robot rally.
+#[derive(Debug, Clone)]
+pub struct Rally {
+    /// Robots and ball.
+    pub arena: DualArena,
+    /// Judges the rally.
+    pub referee: Referee,
+    /// Cap and time limit.
+    pub params: RallyParams,
+    /// Control steps taken.
+    pub steps: usize,
+    /// Whether the rally is over.
+    pub done: bool,
+    /// Every incoming ball's crossing of its receiver's hitting plane, in order.
+    pub crossings: Vec<Crossing>,
+    watch: Option<Watch>,
+    bounce: BounceModel,
+}
+
+impl Rally {
+    /// A rally environment (call [`Rally::reset`] before stepping).
+    pub fn new(model: Arc<Model>, config: &ArenaConfig, preset: Preset) -> Result<Rally, String> {
+        let ball = BallState::new(V3::new(0.0, 0.0, 2.0), V3::zeros());
+        Ok(Rally {
+            arena: DualArena::new(model, config, preset, ball)?,
+            referee: Referee::new(Side::A),
+            params: config.rally.clone(),
+            steps: 0,
+            done: false,
+            crossings: Vec::new(),
+            watch: None,
+            bounce: BounceModel::for_table(&preset.table),
+        })
+    }
+
+    /// A new rally: both robots at `qpos` (default "ready"), `server` serves the paper's rally serve.
+    pub fn reset(&mut self, server: Side, rng: &mut Rng, qpos: Option<&[f64]>) -> Serve {
+        let ready = ready_pose(self.arena.robots[0].held_model());
+        for r in self.arena.robots.iter_mut() {
+            r.reset(qpos.or(ready.as_deref()));
+        }
+        let serve = serve::generate(ServeKind::Rally { server }, rng, &self.bounce);
+        self.arena.world = BallWorld::new(self.arena.world.preset, serve.ball);
+        self.referee = Referee::new(server);
+        self.steps = 0;
+        self.done = false;
+        self.crossings.clear();
+        self.watch = Some(Watch {
+            receiver: server.other(),
+            exchange: 0,
+        });
+        serve
+    }
+
+    /// One control step with the controls the caller set on both robots.
+    pub fn step(&mut self) -> StepReport {
+        let mut report = StepReport::default();
+        if self.done {
+            report.done = true;
+            return report;
+        }
+        for _ in 0..arena::SUBSTEPS {
+            let before = self.arena.world.ball;
+            let mut events = Vec::new();
+            let grip_ab = self.arena.physics_step(&mut events);
+            let grip: Vec<(Side, GripEvent)> = [Side::A, Side::B]
+                .into_iter()
+                .zip(grip_ab)
+                .filter_map(|(s, g)| g.map(|g| (s, g)))
+                .collect();
+            self.watch_crossing(&before, &events);
+            let world = &self.arena.world;
+            let mut calls = Vec::new();
+            judge(
+                &mut self.referee,
+                &events,
+                world.time,
+                world.ball.pos.z,
+                &grip,
+                &mut calls,
+            );
+            for c in &calls {
+                if let Call::Hit { side, .. } = c {
+                    // The return is incoming for the other side: watch its crossing.
+                    self.watch = Some(Watch {
+                        receiver: side.other(),
+                        exchange: self.referee.rally_length() + 1,
+                    });
+                }
+            }
+            report.calls.extend(calls);
+            report.events.extend(events);
+            report.grip.extend(grip);
+            if self.referee.end().is_some() {
+                break;
+            }
+        }
+        self.steps += 1;
+        let t = self.arena.world.time;
+        if self.referee.end().is_none()
+            && (self.referee.rally_length() >= self.params.cap || t >= self.params.max_seconds)
+        {
+            report.calls.extend(self.referee.cap(t));
+        }
+        self.done = self.referee.end().is_some();
+        report.done = self.done;
+        report
+    }
+
+    /// A side's policy produced NaN or infinite actions: that side loses the rally (INVALID_ACTION).
+    pub fn invalid_action(&mut self, side: Side) {
+        self.referee
+            .report(side, Failure::InvalidAction, self.arena.world.time);
+        self.done = true;
+    }
+
+    /// Records the watched ball's crossing of its receiver's plane in this physics step; if the
+    /// receiver hit it first, extrapolates the uninterrupted flight from the state before the hit.
+    fn watch_crossing(&mut self, before: &BallState, events: &[ContactEvent]) {
+        let Some(w) = self.watch else { return };
+        let plane = w.receiver.strike_plane_x();
+        let after = self.arena.world.ball;
+        let hit_early = events
+            .iter()
+            .any(|e| e.kind == ContactKind::Paddle { owner: w.receiver });
+        let crossed =
+            (before.pos.x - plane) * (after.pos.x - plane) <= 0.0 && before.pos.x != after.pos.x;
+        let crossing = if crossed && !hit_early {
+            let f = (plane - before.pos.x) / (after.pos.x - before.pos.x);
+            let p = before.pos + (after.pos - before.pos) * f;
+            Some((
+                p,
+                self.arena.world.time - arena::TIMESTEP * (1.0 - f),
+                false,
+            ))
+        } else if hit_early {
+            predict::plane_crossing(&before.pos, &before.vel, plane, &self.bounce)
+                .map(|c| (c.pos, self.arena.world.time - arena::TIMESTEP + c.t, true))
+        } else {
+            None
+        };
+        if crossed || hit_early {
+            self.watch = None;
+        }
+        if let Some((p, t, extrapolated)) = crossing {
+            let (y_r, z) = w.receiver.receiver_frame(&p);
+            self.crossings.push(Crossing {
+                receiver: w.receiver,
+                exchange: w.exchange,
+                y_r,
+                z,
+                in_box: arena::in_serve_box(y_r, z),
+                extrapolated,
+                t,
+            });
+        }
+    }
+}
