@@ -25,6 +25,8 @@ enum Command {
     Bench(cmd::bench::BenchArgs),
     /// Inspect an MJCF model, or print its muscle lengths and moment arms at a configuration.
     Model(cmd::model::ModelArgs),
+    /// The physics-based planner's racket command for a ball (paper §IV-B), as JSON.
+    Plan(cmd::plan::PlanArgs),
 }
 
 fn main() -> ExitCode {
@@ -33,6 +35,7 @@ fn main() -> ExitCode {
         Command::Ball(args) => cmd::ball::run(&args),
         Command::Bench(args) => cmd::bench::run(&args),
         Command::Model(args) => cmd::model::run(&args),
+        Command::Plan(args) => cmd::plan::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,7 +4,9 @@
     python tools/gen_upper_body.py [--out config/models/upper_body.xml]
 
 The robot (side A; the dual arena turns it about (0, 0.04) for side B):
-- pelvis on two slide joints (x, y in the robot frame) driven by position servos (kp 3500, as MyoSuite);
+- pelvis on two slide joints (x, y in the robot frame) driven by position servos (kp 3500, as MyoSuite),
+  standing in for footwork: +-0.4 m forward/back, +-1.0 m sideways, damped (600 N s/m) to about 0.7 of
+  critical for the ~50 kg body;
 - a lumbar spine of five levels (L5/S1 .. L1/L2), three hinges each (flexion, lateral bending, axial
   rotation); the L5/S1 hinges are the three independent torso DoF and the other twelve follow them by
   linear couplings (<equality><joint polycoef>), 40 trunk muscles (20 per side);
@@ -15,8 +17,9 @@ The robot (side A; the dual arena turns it about (0, 0.04) for side B):
   isometrically;
 - the paddle welded to the hand at its nominal grip pose (the grip model in `sim` may release it).
 
-Robot frame: x forward, y to the robot's left, z up; the root is at world (2.3, 0.04, 0) turned 180
-degrees about z so the robot faces the net (-x). Muscle paths run through sites only (no wrapping).
+Robot frame: x forward, y to the robot's left, z up; the root is at world (2.1, -0.6, 0) turned 180
+degrees about z so the robot faces the net (-x), standing to the left of the centre line as a
+right-handed player does (the pelvis slides then reach the whole hitting plane with the forehand). Muscle paths run through sites only (no wrapping).
 Joint signs: shoulder_flex > 0 raises the arm forward, shoulder_abd > 0 raises it sideways,
 shoulder_rot > 0 rotates it inwards, elbow_flex > 0 bends the elbow, wrist_flex > 0 bends the hand
 towards the palm, wrist_dev > 0 towards the thumb, grip > 0 closes the fingers; lumbar signs below.
@@ -54,7 +57,11 @@ LEVELS = [
 # spine and hips too, which the model does not have). Dependent levels share the same range, which their
 # ratios (at most 1) keep them inside.
 # Signs: flex > 0 bends forward, lat > 0 bends to the robot's right, rot > 0 turns the chest to the left.
+# Each level also has the passive stiffness of its disc and ligaments (N m/rad, towards upright), of the
+# order of published lumbar motion-segment stiffness (flexion ~1 N m/deg, lateral ~1.5, axial rotation
+# several N m/deg), which is what keeps a real trunk steady while the legs move it around.
 LUMBAR_AXES = [("flex", (0, 1, 0), (-0.13, 0.27)), ("lat", (1, 0, 0), (-0.13, 0.13)), ("rot", (0, 0, 1), (-0.14, 0.14))]
+LUMBAR_STIFFNESS = {"flex": 60.0, "lat": 90.0, "rot": 300.0}
 
 # --- trunk muscles (left side; the right side mirrors y) -----------------------------------------
 # name: (force N, [(body, (x, y, z)), ...]); bodies: pelvis, L5..L1, thorax.
@@ -191,16 +198,16 @@ def build(lengthranges=None):
     x.append('      <site size="0.004" group="3" rgba="0.8 0.2 0.2 1"/>\n')
     x.append("    </default>\n")
     x.append('    <default class="spine">\n')
-    x.append('      <joint damping="2" armature="0.02"/>\n')
+    x.append('      <joint damping="20" armature="0.02"/>\n')
     x.append("    </default>\n")
     x.append("  </default>\n")
     x.append("  <worldbody>\n")
-    x.append('    <body name="root" pos="2.3 0.04 0" euler="0 0 3.14159265358979">\n')
+    x.append('    <body name="root" pos="2.1 -0.6 0" euler="0 0 3.14159265358979">\n')
     x.append('      <body name="pelvis_slider">\n')
-    x.append('        <joint name="pelvis_tx" type="slide" axis="1 0 0" range="-0.35 0.35" damping="50" armature="0"/>\n')
+    x.append('        <joint name="pelvis_tx" type="slide" axis="1 0 0" range="-0.4 0.4" damping="600" armature="0"/>\n')
     x.append('        <inertial pos="0 0 0.5" mass="2" diaginertia="0.05 0.05 0.05"/>\n')
     x.append('        <body name="pelvis" pos="0 0 0.95">\n')
-    x.append('          <joint name="pelvis_ty" type="slide" axis="0 1 0" range="-0.6 0.6" damping="50" armature="0"/>\n')
+    x.append('          <joint name="pelvis_ty" type="slide" axis="0 1 0" range="-1.0 1.0" damping="600" armature="0"/>\n')
     x.append('          <inertial pos="0 0 0" mass="11" diaginertia="0.10 0.08 0.10"/>\n')
     x.append('          <geom type="box" size="0.09 0.15 0.07"/>\n')
     x.append(site_lines("pelvis", "          "))
@@ -210,7 +217,8 @@ def build(lengthranges=None):
         indent += "  "
         x.append(f'{indent}<body name="{body}" pos="{fmt(off)}">\n')
         for suffix, axis, rng in LUMBAR_AXES:
-            x.append(f'{indent}  <joint name="{prefix}_{suffix}" axis="{fmt(axis)}" range="{fmt(rng)}" class="spine"/>\n')
+            k = LUMBAR_STIFFNESS[suffix]
+            x.append(f'{indent}  <joint name="{prefix}_{suffix}" axis="{fmt(axis)}" range="{fmt(rng)}" stiffness="{k:g}" class="spine"/>\n')
         x.append(f'{indent}  <inertial pos="0 0 0.015" mass="1.2" diaginertia="0.004 0.004 0.006"/>\n')
         x.append(f'{indent}  <geom type="cylinder" size="0.025 0.012" pos="0 0 0.015"/>\n')
         x.append(site_lines(body, indent + "  "))
@@ -280,8 +288,8 @@ def build(lengthranges=None):
         x.append(f'    <spatial name="{name}_tendon">' + "".join(f'<site site="{s}"/>' for s in names) + "</spatial>\n")
     x.append("  </tendon>\n")
     x.append("  <actuator>\n")
-    x.append('    <position name="pelvis_tx_servo" joint="pelvis_tx" kp="3500" ctrlrange="-0.35 0.35"/>\n')
-    x.append('    <position name="pelvis_ty_servo" joint="pelvis_ty" kp="3500" ctrlrange="-0.6 0.6"/>\n')
+    x.append('    <position name="pelvis_tx_servo" joint="pelvis_tx" kp="3500" ctrlrange="-0.4 0.4"/>\n')
+    x.append('    <position name="pelvis_ty_servo" joint="pelvis_ty" kp="3500" ctrlrange="-1.0 1.0"/>\n')
     for name, force, _ in tendons:
         lr = ""
         if lengthranges is not None:
@@ -296,7 +304,8 @@ def build(lengthranges=None):
     x.append("  <keyframe>\n")
     x.append("    <!-- qpos order: pelvis_tx pelvis_ty, 15 lumbar (5 levels x flex lat rot), shoulder 3, elbow,\n")
     x.append("         pronation, wrist 2, grip. Dependent lumbar joints are set by the couplings on load. -->\n")
-    ready = [0.0, 0.0] + [0.08, 0.0, 0.0] * 5 + [0.5, 0.35, 0.2, 1.3, 0.0, 0.0, 0.0, 1.0]
+    # Ready: stepped back so the paddle waits behind the hitting plane (a rally serve starts on it).
+    ready = [-0.3, 0.0] + [0.08, 0.0, 0.0] * 5 + [0.1, 0.35, 0.2, 1.4, 0.0, 0.0, 0.0, 1.0]
     x.append(f'    <key name="ready" qpos="{fmt(ready)}"/>\n')
     # Arm hanging near its equilibrium, trunk upright: the start of MuJoCo's passive cross-check motion.
     hang = [0.0, 0.0] + [0.0, 0.0, 0.0] * 5 + [0.0, 0.1, 0.0, 0.15, 0.0, 0.0, 0.0, 0.5]

@@ -4,6 +4,7 @@
 pub mod ball;
 pub mod bench;
 pub mod model;
+pub mod plan;
 
 use nalgebra::Vector3;
 

@@ -1,0 +1,215 @@
+//! The controllers and the IK on the default robot: K-MAC holds a posture against gravity, no
+//! controller ever asks a muscle to push or an activation to leave [0, 1], Muscle-PD relaxes at its
+//! target, DynSyn's grouping is deterministic, and the IK reaches the hitting plane.
+
+use std::sync::Arc;
+
+use agents::controller::{
+    direct_controls, muscle_pd_control, ActionSpace, Kmac, MuscleNow, MusclePd, PdGains, Synergies,
+};
+use agents::ik::{BladeTarget, PaddleIk};
+use nalgebra::Vector3;
+use sim::config::{ArenaConfig, DEFAULT_MODEL_XML};
+use sim::model::Model;
+use sim::rng::Rng;
+use sim::robot::{GripPhase, Robot};
+
+fn model() -> Arc<Model> {
+    Arc::new(sim::mjcf::parse_str(DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+}
+
+fn ready(model: &Model) -> Vec<f64> {
+    let mut q = sim::episode::ready_pose(model).unwrap();
+    model.apply_couplings(&mut q);
+    q
+}
+
+#[test]
+fn kmac_holds_the_ready_posture_against_gravity() {
+    let m = model();
+    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
+    let q0 = ready(&m);
+    robot.reset(Some(&q0));
+    let mut kmac = Kmac::new(&m, PdGains { kp: 40.0, kd: 3.0 });
+    let targets: Vec<f64> = kmac
+        .space
+        .joints
+        .iter()
+        .map(|&j| q0[m.joints[j].qpos_adr])
+        .collect();
+    let mut ctrl = vec![0.0; m.actuators.len()];
+    for _ in 0..100 {
+        kmac.controls(&m, &robot.state, &targets, 0.01, &mut ctrl);
+        robot.state.ctrl.copy_from_slice(&ctrl);
+        for _ in 0..5 {
+            robot.physics_step();
+        }
+    }
+    // Without K-MAC the arm falls ~1 rad in that second; with it every joint stays near its target.
+    for (&j, &z) in kmac.space.joints.iter().zip(&targets) {
+        let err = (robot.state.qpos[m.joints[j].qpos_adr] - z).abs();
+        assert!(
+            err < 0.12,
+            "{} drifted {err:.3} rad from its target",
+            m.joints[j].name
+        );
+    }
+    assert_eq!(robot.phase, GripPhase::Held);
+}
+
+#[test]
+fn no_controller_asks_a_muscle_to_push_or_leaves_0_1() {
+    let m = model();
+    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
+    robot.reset(Some(&ready(&m)));
+    let mut kmac = Kmac::new(&m, PdGains { kp: 80.0, kd: 2.0 });
+    let mut pd = MusclePd::new(&m, PdGains::MUSCLE_PD);
+    let space = ActionSpace::new(&m);
+    let mut rng = Rng::seeded(5);
+    let mut ctrl = vec![0.0; m.actuators.len()];
+    for step in 0..200 {
+        // Random targets inside the joint ranges (and random lengths inside the length ranges).
+        let targets: Vec<f64> = space
+            .joints
+            .iter()
+            .map(|&j| {
+                let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
+                rng.uniform(r[0], r[1])
+            })
+            .collect();
+        match step % 3 {
+            0 => kmac.controls(&m, &robot.state, &targets, 0.01, &mut ctrl),
+            1 => {
+                let lengths: Vec<f64> = space
+                    .muscles
+                    .iter()
+                    .map(|&a| {
+                        let lr = m.actuators[a].lengthrange;
+                        rng.uniform(lr[0], lr[1])
+                    })
+                    .collect();
+                pd.controls(&m, &robot.state, &lengths, &[0.0, 0.0], 0.01, &mut ctrl)
+            }
+            _ => {
+                let raw: Vec<f64> = space
+                    .muscles
+                    .iter()
+                    .map(|_| rng.uniform(-0.5, 1.5))
+                    .collect();
+                direct_controls(&space, &raw, &[0.1, -0.1], &mut ctrl)
+            }
+        }
+        for &a in &space.muscles {
+            assert!(
+                (0.0..=1.0).contains(&ctrl[a]),
+                "control {} of {}",
+                ctrl[a],
+                m.actuators[a].name
+            );
+        }
+        robot.state.ctrl.copy_from_slice(&ctrl);
+        for _ in 0..5 {
+            robot.physics_step();
+            for &a in &space.muscles {
+                assert!(
+                    robot.data.actuator_force[a] <= 1e-12,
+                    "{} pushes",
+                    m.actuators[a].name
+                );
+                assert!((-1e-12..=1.0 + 1e-12).contains(&robot.state.act[a]));
+            }
+        }
+    }
+}
+
+#[test]
+fn at_its_target_length_and_at_rest_a_muscle_is_told_to_relax() {
+    let m = model();
+    let a = m.actuator("BRA").unwrap();
+    let lr = m.actuators[a].lengthrange;
+    // A length where the passive force is zero (short of the optimum).
+    let l = lr[0] + 0.2 * (lr[1] - lr[0]);
+    let u = muscle_pd_control(
+        &m,
+        a,
+        l,
+        &MuscleNow {
+            length: l,
+            velocity: 0.0,
+            act: 0.5,
+        },
+        &PdGains { kp: 10.0, kd: 1.0 },
+        0.01,
+    );
+    // act* = 0, so the control drops below the activation to deactivate within one step (τ_deact).
+    assert!(u < 0.5, "{u}");
+    // Too long by 2 cm: it pulls, with the control that reaches act* in one 10 ms step from rest
+    // (τ = τ_act·0.5 = 5 ms, so u = act*/2).
+    let too_long = MuscleNow {
+        length: l + 0.02,
+        velocity: 0.0,
+        act: 0.0,
+    };
+    let u = muscle_pd_control(&m, a, l, &too_long, &PdGains { kp: 10.0, kd: 1.0 }, 0.01);
+    assert!(u > 0.2 && u <= 0.5, "{u}");
+}
+
+#[test]
+fn dynsyn_groups_are_deterministic_and_cover_every_muscle() {
+    let m = model();
+    let a = Synergies::derive(&m, 12, 3);
+    let b = Synergies::derive(&m, 12, 3);
+    assert_eq!(a, b);
+    assert_eq!(a.group_of.len(), m.muscles().count());
+    for g in 0..12 {
+        assert!(a.group_of.contains(&g), "group {g} is empty");
+    }
+    // Left and right rectus abdominis move together in every motion: same group.
+    let space = ActionSpace::new(&m);
+    let idx = |name: &str| {
+        space
+            .muscles
+            .iter()
+            .position(|&x| m.actuators[x].name == name)
+            .unwrap()
+    };
+    assert_eq!(a.group_of[idx("TRIlat")], a.group_of[idx("TRImed")]);
+}
+
+#[test]
+fn ik_reaches_the_hitting_plane_with_the_blade_facing_the_net() {
+    let m = model();
+    let mut ik = PaddleIk::new(
+        &m,
+        m.body("paddle").unwrap(),
+        Vector3::from(sim::arena::BLADE_OFFSET),
+        &[m.joint("grip").unwrap()],
+    );
+    let q0 = ready(&m);
+    let mut worst: f64 = 0.0;
+    for y in [-0.6, -0.2, 0.2, 0.6, 1.0] {
+        for z in [0.95, 1.15, 1.35] {
+            let t = BladeTarget {
+                pos: Vector3::new(1.8, y, z),
+                normal: Vector3::new(-1.0, 0.1, 0.1).normalize(),
+            };
+            let s = ik.solve_near(&m, &q0, Some(&q0), &t, 200);
+            worst = worst.max(s.position_error);
+            assert!(
+                s.normal_error < 0.05,
+                "y {y} z {z}: normal off by {}",
+                s.normal_error
+            );
+            for j in &m.joints {
+                if let Some([lo, hi]) = j.range {
+                    assert!(
+                        s.qpos[j.qpos_adr] >= lo - 1e-9 && s.qpos[j.qpos_adr] <= hi + 1e-9,
+                        "{} out of range",
+                        j.name
+                    );
+                }
+            }
+        }
+    }
+    assert!(worst < 0.01, "worst position error {worst}");
+}
