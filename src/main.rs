@@ -23,6 +23,8 @@ enum Command {
     Ball(Box<cmd::ball::BallArgs>),
     /// Measure simulator speed against MuJoCo on the same work.
     Bench(cmd::bench::BenchArgs),
+    /// Evaluate an agent on seeded single-serve episodes: hit and success rates, effort.
+    Eval(cmd::eval::EvalArgs),
     /// Inspect an MJCF model, or print its muscle lengths and moment arms at a configuration.
     Model(cmd::model::ModelArgs),
     /// The physics-based planner's racket command for a ball (paper §IV-B), as JSON.
@@ -35,6 +37,7 @@ fn main() -> ExitCode {
         Command::Ball(args) => cmd::ball::run(&args),
         Command::Bench(args) => cmd::bench::run(&args),
         Command::Model(args) => cmd::model::run(&args),
+        Command::Eval(args) => cmd::eval::run(&args),
         Command::Plan(args) => cmd::plan::run(&args),
     };
     match result {

@@ -10,8 +10,10 @@
 #![forbid(unsafe_code)]
 
 pub mod controller;
+pub mod eval;
 pub mod ik;
 pub mod planner;
+pub mod player;
 pub mod scripted;
 
 /// The simulator this crate drives, re-exported so that callers name one version of it.

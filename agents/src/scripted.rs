@@ -54,14 +54,14 @@ pub struct ScriptedParams {
 impl Default for ScriptedParams {
     fn default() -> Self {
         ScriptedParams {
-            gains: PdGains { kp: 8.0, kd: 0.4 },
+            gains: PdGains { kp: 40.0, kd: 3.0 },
             swing_time: 0.16,
             backswing: 0.06,
             lead: 0.03,
             candidates: 12,
             drive: false,
             grip_target: 1.05,
-            grip_activation: Some(0.06),
+            grip_activation: Some(0.03),
             outer_kp: 0.5,
             outer_ki: 4.0,
         }
@@ -129,6 +129,11 @@ impl Scripted {
             integral,
             follow_until: f64::NEG_INFINITY,
         }
+    }
+
+    /// Reseeds the return-sampler draws.
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = Rng::seeded(seed);
     }
 
     /// Forgets the current stroke and the outer loop's integral (call at every new episode or rally).
@@ -294,4 +299,29 @@ impl Scripted {
             }
         }
     }
+}
+
+/// The scripted variants the house offers, by name: the default blocker, a driver that asks for fast
+/// returns, and a softer, lower-gain player.
+pub fn variants() -> Vec<(&'static str, ScriptedParams)> {
+    let base = ScriptedParams::default();
+    vec![
+        ("scripted", base.clone()),
+        (
+            "scripted-drive",
+            ScriptedParams {
+                drive: true,
+                backswing: 0.10,
+                ..base.clone()
+            },
+        ),
+        (
+            "scripted-soft",
+            ScriptedParams {
+                gains: PdGains { kp: 20.0, kd: 2.0 },
+                lead: 0.05,
+                ..base
+            },
+        ),
+    ]
 }

@@ -3,6 +3,7 @@
 
 pub mod ball;
 pub mod bench;
+pub mod eval;
 pub mod model;
 pub mod plan;
 

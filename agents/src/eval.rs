@@ -1,0 +1,279 @@
+//! Evaluation in the single-serve environment (paper §V-B, DESIGN §7): hit rate, success rate,
+//! effort and mean activation over seeded episodes, each with a 95% interval. Episodes run in
+//! parallel (rayon), each with its own seeds derived from the evaluation seed and its index, and are
+//! aggregated in index order, so the numbers depend only on the seed — never on the thread count.
+
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use serde::Serialize;
+use sim::arena::{Preset, Side};
+use sim::config::ArenaConfig;
+use sim::episode::SingleServe;
+use sim::model::Model;
+use sim::rng::Rng;
+use sim::serve::ServeKind;
+
+use crate::player::{Player, PlayerSpec};
+
+/// One episode's outcome.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct EpisodeResult {
+    /// The paddle touched the ball.
+    pub hit: bool,
+    /// The return was legal.
+    pub success: bool,
+    /// Mean over control steps of ‖a‖₂ / n_a (MyoSuite's effort).
+    pub effort: f64,
+    /// Mean over control steps of ‖a‖₁ / n_a.
+    pub mean_activation: f64,
+    /// How it ended: a failure's name, "SUCCESS", or "TIME_LIMIT".
+    pub end: &'static str,
+}
+
+/// A rate with its Wilson 95% interval.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Rate {
+    /// Successes / trials.
+    pub value: f64,
+    /// Lower end of the interval.
+    pub low: f64,
+    /// Upper end of the interval.
+    pub high: f64,
+}
+
+/// A mean with its normal-approximation 95% interval.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Mean {
+    /// The mean.
+    pub value: f64,
+    /// Lower end of the interval.
+    pub low: f64,
+    /// Upper end of the interval.
+    pub high: f64,
+}
+
+/// Wilson score interval at 95% (z = 1.96) for `k` of `n`.
+pub fn wilson(k: usize, n: usize) -> Rate {
+    if n == 0 {
+        return Rate {
+            value: 0.0,
+            low: 0.0,
+            high: 1.0,
+        };
+    }
+    let (k, n, z) = (k as f64, n as f64, 1.959_963_984_540_054);
+    let p = k / n;
+    let denom = 1.0 + z * z / n;
+    let centre = (p + z * z / (2.0 * n)) / denom;
+    let half = z * ((p * (1.0 - p) + z * z / (4.0 * n)) / n).sqrt() / denom;
+    Rate {
+        value: p,
+        low: (centre - half).max(0.0),
+        high: (centre + half).min(1.0),
+    }
+}
+
+/// Mean and 95% interval (1.96 standard errors) of `xs`.
+pub fn mean_interval(xs: &[f64]) -> Mean {
+    let n = xs.len() as f64;
+    if xs.is_empty() {
+        return Mean {
+            value: 0.0,
+            low: 0.0,
+            high: 0.0,
+        };
+    }
+    let m = xs.iter().sum::<f64>() / n;
+    let var = if xs.len() > 1 {
+        xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    let half = 1.959_963_984_540_054 * (var / n).sqrt();
+    Mean {
+        value: m,
+        low: m - half,
+        high: m + half,
+    }
+}
+
+/// An evaluation's summary.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvalReport {
+    /// Who was evaluated.
+    pub agent: String,
+    /// Serve kind ("p1" or "p2").
+    pub serve: String,
+    /// Evaluation seed.
+    pub seed: u64,
+    /// Episodes played.
+    pub episodes: usize,
+    /// Hit rate.
+    pub hit_rate: Rate,
+    /// Success rate.
+    pub success_rate: Rate,
+    /// Effort (‖a‖₂ / n_a).
+    pub effort: Mean,
+    /// Mean activation (‖a‖₁ / n_a).
+    pub mean_activation: Mean,
+    /// How many episodes ended each way.
+    pub ends: Vec<(String, usize)>,
+}
+
+/// The serve seed and the agent seed of episode `i` of an evaluation with `seed` (SplitMix64-style
+/// mixing, so neighbouring episodes get unrelated streams).
+pub fn episode_seeds(seed: u64, i: usize) -> (u64, u64) {
+    let mix = |mut z: u64| {
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    let base = mix(seed ^ mix(i as u64 + 0x9e37_79b9_7f4a_7c15));
+    (base, mix(base.wrapping_add(1)))
+}
+
+/// Plays one single-serve episode with `player`.
+pub fn play_episode(
+    env: &mut SingleServe,
+    player: &mut dyn Player,
+    kind: ServeKind,
+    serve_seed: u64,
+) -> EpisodeResult {
+    env.reset(kind, &mut Rng::seeded(serve_seed), None);
+    player.reset();
+    let model = env.robot.held_model().clone();
+    let muscles: Vec<usize> = model.muscles().map(|(i, _)| i).collect();
+    let na = muscles.len().max(1) as f64;
+    let mut ctrl = vec![0.0; model.actuators.len()];
+    let (mut effort, mut l1, mut steps) = (0.0, 0.0, 0usize);
+    loop {
+        ctrl.copy_from_slice(&env.robot.state.ctrl);
+        let ok = player
+            .act(&env.robot, &env.world.ball, env.world.time, &mut ctrl)
+            .is_ok()
+            && ctrl.iter().all(|c| c.is_finite());
+        if !ok {
+            env.invalid_action();
+            break;
+        }
+        env.robot.state.ctrl.copy_from_slice(&ctrl);
+        let done = env.step().done;
+        let act = &env.robot.state.act;
+        effort += muscles.iter().map(|&a| act[a] * act[a]).sum::<f64>().sqrt() / na;
+        l1 += muscles.iter().map(|&a| act[a].abs()).sum::<f64>() / na;
+        steps += 1;
+        if done {
+            break;
+        }
+    }
+    let end = if env.success {
+        "SUCCESS"
+    } else {
+        env.referee
+            .end()
+            .map(|e| e.reason.name())
+            .unwrap_or("TIME_LIMIT")
+    };
+    let steps = steps.max(1) as f64;
+    EpisodeResult {
+        hit: env.hit,
+        success: env.success,
+        effort: effort / steps,
+        mean_activation: l1 / steps,
+        end,
+    }
+}
+
+/// Evaluates `spec` on `episodes` serves of `kind`; `progress` is called after each episode.
+pub fn evaluate(
+    model: Arc<Model>,
+    config: &ArenaConfig,
+    preset: Preset,
+    spec: &PlayerSpec,
+    kind: ServeKind,
+    episodes: usize,
+    seed: u64,
+    progress: &(dyn Fn() + Sync),
+) -> Result<EvalReport, String> {
+    // Fail early, once, on anything wrong with the player or the arena.
+    SingleServe::new(model.clone(), config, preset)?;
+    spec.build(&model, Side::A, 0)?;
+    let results: Vec<EpisodeResult> = (0..episodes)
+        .into_par_iter()
+        .map_init(
+            || {
+                let env = SingleServe::new(model.clone(), config, preset).expect("checked above");
+                (env, None::<Box<dyn Player>>)
+            },
+            |(env, player), i| {
+                let (serve_seed, agent_seed) = episode_seeds(seed, i);
+                let p = player.insert(
+                    spec.build(&model, Side::A, agent_seed)
+                        .expect("checked above"),
+                );
+                p.reseed(agent_seed);
+                let r = play_episode(env, p.as_mut(), kind, serve_seed);
+                progress();
+                r
+            },
+        )
+        .collect();
+    let hits = results.iter().filter(|r| r.hit).count();
+    let wins = results.iter().filter(|r| r.success).count();
+    let mut ends: Vec<(String, usize)> = Vec::new();
+    for r in &results {
+        match ends.iter_mut().find(|(e, _)| e == r.end) {
+            Some((_, n)) => *n += 1,
+            None => ends.push((r.end.to_string(), 1)),
+        }
+    }
+    ends.sort();
+    Ok(EvalReport {
+        agent: spec.name(),
+        serve: match kind {
+            ServeKind::P0 => "p0",
+            ServeKind::P1 => "p1",
+            ServeKind::P2 => "p2",
+            ServeKind::Rally { .. } => "rally",
+        }
+        .to_string(),
+        seed,
+        episodes,
+        hit_rate: wilson(hits, episodes),
+        success_rate: wilson(wins, episodes),
+        effort: mean_interval(&results.iter().map(|r| r.effort).collect::<Vec<_>>()),
+        mean_activation: mean_interval(
+            &results
+                .iter()
+                .map(|r| r.mean_activation)
+                .collect::<Vec<_>>(),
+        ),
+        ends,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wilson_matches_known_values() {
+        // 8 of 10: Wilson 95% interval (0.490, 0.943).
+        let r = wilson(8, 10);
+        assert!(
+            (r.low - 0.4902).abs() < 1e-3 && (r.high - 0.9433).abs() < 1e-3,
+            "{r:?}"
+        );
+        let r = wilson(0, 20);
+        assert_eq!(r.low, 0.0);
+        assert!((r.high - 0.1611).abs() < 1e-3);
+    }
+
+    #[test]
+    fn episode_seeds_differ_and_repeat() {
+        assert_eq!(episode_seeds(7, 3), episode_seeds(7, 3));
+        assert_ne!(episode_seeds(7, 3), episode_seeds(7, 4));
+        assert_ne!(episode_seeds(7, 3), episode_seeds(8, 3));
+    }
+}

@@ -1,0 +1,104 @@
+//! Who plays: anything that turns the robot's state and the ball into muscle controls each control
+//! step — the scripted house agents now, trained checkpoints later — behind one trait, so the
+//! evaluation and the match runner treat them alike.
+
+use sim::arena::Side;
+use sim::ball::BallState;
+use sim::model::Model;
+use sim::predict::BounceModel;
+use sim::robot::Robot;
+
+use crate::scripted::{Scripted, ScriptedParams};
+
+/// The player produced controls that are not finite numbers (NaN or infinite): INVALID_ACTION.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct InvalidAction;
+
+/// A controller of one robot.
+pub trait Player: Send {
+    /// Forgets everything about the previous episode or rally.
+    fn reset(&mut self);
+    /// Sets the seed of the player's own randomness (the evaluation gives each episode its own).
+    fn reseed(&mut self, seed: u64);
+    /// Writes the robot's controls for this control step; `ball` is in the world frame, `t` the
+    /// arena's time.
+    fn act(
+        &mut self,
+        robot: &Robot,
+        ball: &BallState,
+        t: f64,
+        ctrl: &mut [f64],
+    ) -> Result<(), InvalidAction>;
+}
+
+impl Player for Scripted {
+    fn reset(&mut self) {
+        Scripted::reset(self);
+    }
+
+    fn reseed(&mut self, seed: u64) {
+        Scripted::reseed(self, seed);
+    }
+
+    fn act(
+        &mut self,
+        robot: &Robot,
+        ball: &BallState,
+        t: f64,
+        ctrl: &mut [f64],
+    ) -> Result<(), InvalidAction> {
+        Scripted::act(self, robot, ball, t, ctrl);
+        Ok(())
+    }
+}
+
+/// How to build a player: a recipe that can be sent to worker threads.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlayerSpec {
+    /// A scripted agent with a name and its parameters.
+    Scripted {
+        /// e.g. "scripted", "scripted-drive".
+        name: String,
+        /// How it plays.
+        params: ScriptedParams,
+    },
+}
+
+impl PlayerSpec {
+    /// The scripted variant called `name`, if there is one (see [`crate::scripted::variants`]).
+    pub fn scripted(name: &str) -> Option<PlayerSpec> {
+        crate::scripted::variants()
+            .into_iter()
+            .find(|(n, _)| *n == name)
+            .map(|(n, params)| PlayerSpec::Scripted {
+                name: n.to_string(),
+                params,
+            })
+    }
+
+    /// Display name.
+    pub fn name(&self) -> String {
+        match self {
+            PlayerSpec::Scripted { name, .. } => name.clone(),
+        }
+    }
+
+    /// A player for `model` on `side`.
+    pub fn build(&self, model: &Model, _side: Side, seed: u64) -> Result<Box<dyn Player>, String> {
+        match self {
+            PlayerSpec::Scripted { params, .. } => {
+                let paddle = model
+                    .body("paddle")
+                    .ok_or("the model has no body named 'paddle'")?;
+                let bounce = BounceModel::for_table(&sim::arena::MYOCHALLENGE.table);
+                Ok(Box::new(Scripted::new(
+                    model,
+                    paddle,
+                    params.clone(),
+                    bounce,
+                    seed,
+                )))
+            }
+        }
+    }
+}
