@@ -185,17 +185,37 @@ pub fn play_episode(
     }
 }
 
-/// Evaluates `spec` on `episodes` serves of `kind`; `progress` is called after each episode.
+/// What an evaluation plays: the arena, the serve distribution, how many episodes, the seed.
+#[derive(Debug, Clone)]
+pub struct Evaluation {
+    /// The robot model.
+    pub model: Arc<Model>,
+    /// Arena constants.
+    pub config: ArenaConfig,
+    /// Contact laws.
+    pub preset: Preset,
+    /// Serve distribution (P1 or P2).
+    pub kind: ServeKind,
+    /// Episodes to play.
+    pub episodes: usize,
+    /// Evaluation seed.
+    pub seed: u64,
+}
+
+/// Evaluates `spec` as `e` says; `progress` is called after each episode.
 pub fn evaluate(
-    model: Arc<Model>,
-    config: &ArenaConfig,
-    preset: Preset,
+    e: &Evaluation,
     spec: &PlayerSpec,
-    kind: ServeKind,
-    episodes: usize,
-    seed: u64,
     progress: &(dyn Fn() + Sync),
 ) -> Result<EvalReport, String> {
+    let (model, config, preset, kind, episodes, seed) = (
+        e.model.clone(),
+        &e.config,
+        e.preset,
+        e.kind,
+        e.episodes,
+        e.seed,
+    );
     // Fail early, once, on anything wrong with the player or the arena.
     SingleServe::new(model.clone(), config, preset)?;
     spec.build(&model, Side::A, 0)?;

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use agents::eval::{evaluate, EvalReport};
+use agents::eval::{evaluate, EvalReport, Evaluation};
 use agents::player::PlayerSpec;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -96,17 +96,16 @@ pub fn run(args: &EvalArgs) -> Result<(), CliError> {
             .expect("valid template"),
     );
     let tick = || bar.inc(1);
-    let report = evaluate(
+    let evaluation = Evaluation {
         model,
-        &config,
-        args.preset,
-        &spec,
+        config,
+        preset: args.preset,
         kind,
-        args.episodes as usize,
-        args.seed,
-        &tick,
-    )
-    .map_err(|e| CliError::Failed(anyhow::anyhow!(e)))?;
+        episodes: args.episodes as usize,
+        seed: args.seed,
+    };
+    let report =
+        evaluate(&evaluation, &spec, &tick).map_err(|e| CliError::Failed(anyhow::anyhow!(e)))?;
     bar.finish_and_clear();
     if args.json {
         println!(
