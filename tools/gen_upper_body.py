@@ -304,8 +304,9 @@ def build(lengthranges=None):
     x.append("  <keyframe>\n")
     x.append("    <!-- qpos order: pelvis_tx pelvis_ty, 15 lumbar (5 levels x flex lat rot), shoulder 3, elbow,\n")
     x.append("         pronation, wrist 2, grip. Dependent lumbar joints are set by the couplings on load. -->\n")
-    # Ready: stepped back so the paddle waits behind the hitting plane (a rally serve starts on it).
-    ready = [-0.3, 0.0] + [0.08, 0.0, 0.0] * 5 + [0.1, 0.35, 0.2, 1.4, 0.0, 0.0, 0.0, 1.0]
+    # Ready: the blade waits behind the hitting plane (a rally serve starts on it) at the middle of where
+    # P2 serves cross it, facing the net (solved with the paddle IK: agents/examples/ready_pose.rs).
+    ready = [0.054, 0.219] + [0.08, 0.0, 0.0] * 5 + [-0.477, 1.017, -0.767, 0.8, 0.011, -0.097, -0.385, 1.0]
     x.append(f'    <key name="ready" qpos="{fmt(ready)}"/>\n')
     # Arm hanging near its equilibrium, trunk upright: the start of MuJoCo's passive cross-check motion.
     hang = [0.0, 0.0] + [0.0, 0.0, 0.0] * 5 + [0.0, 0.1, 0.0, 0.15, 0.0, 0.0, 0.0, 0.5]

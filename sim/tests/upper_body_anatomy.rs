@@ -1,4 +1,5 @@
-//! The default robot's muscles do what their names say: at the "ready" and "hang" postures each
+//! The default robot's muscles do what their names say: at the "hang" posture and at a mid-range one
+//! (arm forward and a little out, elbow bent, trunk slightly flexed) each
 //! muscle's moment arm on its primary joints has the sign of its textbook action and a size of
 //! 5 mm to 8 cm (16 cm for the trunk, whose abdominal wall lies far in front of the spine). (Joint signs are documented in `tools/gen_upper_body.py`: positive flexes forward,
 //! abducts, rotates inwards, closes the grip; lumbar `lat` > 0 bends right, `rot` > 0 turns left.)
@@ -88,13 +89,27 @@ fn every_muscle_acts_as_its_name_says() {
     let mut kin = Kinematics::new(&m);
     let mut ten = TendonKinematics::new(&m);
     let mut failures = Vec::new();
-    for key in ["ready", "hang"] {
-        let k = m
-            .keyframes
-            .iter()
-            .find(|k| k.name == key)
-            .expect("keyframe");
-        let mut q = k.qpos.clone();
+    let hang = m
+        .keyframes
+        .iter()
+        .find(|k| k.name == "hang")
+        .expect("hang keyframe")
+        .qpos
+        .clone();
+    let mut mid = hang.clone();
+    let posture = [
+        ("L5S1_flex", 0.08),
+        ("shoulder_flex", 0.5),
+        ("shoulder_abd", 0.35),
+        ("shoulder_rot", 0.2),
+        ("elbow_flex", 1.3),
+        ("grip", 1.0),
+    ];
+    for (joint, value) in posture {
+        mid[m.joints[m.joint(joint).unwrap()].qpos_adr] = value;
+    }
+    for (key, start) in [("hang", hang), ("mid", mid)] {
+        let mut q = start;
         m.apply_couplings(&mut q);
         kin.update(&m, &q);
         ten.update(&m, &kin);
