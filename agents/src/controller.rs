@@ -457,3 +457,86 @@ fn k_medoids(distance: &[Vec<f64>], k: usize) -> Vec<usize> {
         })
         .collect()
 }
+
+/// The joint-target offset that lets K-MAC hold `qpos` still against gravity and the joints' passive
+/// springs (a static feed-forward for callers that track postures, e.g. the scripted agent).
+///
+/// Near a target, K-MAC's muscle forces are `f_i = F_i·k_p·r_iᵀ(z* − z)/Δl_i` (moment arms `r_i`), a
+/// joint stiffness `K = Σ F_i·k_p/Δl_i · r_i r_iᵀ`, of which about half acts (muscles only pull: one of
+/// each antagonist pair). Holding `z` needs the muscle torque `τ = G(z) − τ_passive(z)`, so the target
+/// must lead by `Δz = (K/2)⁻¹ τ`. Returned per `space.joints` entry (zero for servo joints and `skip`).
+pub fn gravity_offset(
+    model: &Model,
+    data: &mut sim::dynamics::Data,
+    space: &ActionSpace,
+    gains: &PdGains,
+    qpos: &[f64],
+    skip: &[usize],
+) -> Vec<f64> {
+    let nv = model.nv;
+    data.positions(model, qpos);
+    data.velocities(model, &vec![0.0; nv]);
+    data.update_couplings(model, qpos, &vec![0.0; nv]);
+    // Torque the muscles must supply, in all dofs: gravity minus the passive springs' help.
+    let mut tau = data.bias.clone();
+    for j in &model.joints {
+        if j.kind != JointKind::Free {
+            tau[j.dof_adr] -= -j.stiffness * (qpos[j.qpos_adr] - j.springref);
+        }
+    }
+    // Joint stiffness of the muscles under K-MAC, in all dofs.
+    let mut k: nalgebra::DMatrix<f64> = nalgebra::DMatrix::zeros(nv, nv);
+    for &a in &space.muscles {
+        let act = &model.actuators[a];
+        let (Some(p), Transmission::Tendon(t)) = (act.muscle(), act.transmission) else {
+            continue;
+        };
+        let c = 0.5 * p.peak_force(0.0) * gains.kp
+            / (act.lengthrange[1] - act.lengthrange[0]).max(1e-9);
+        let dofs = &data.ten.dofs[t];
+        for &i in dofs {
+            for &j in dofs {
+                k[(i, j)] += c * data.ten.moment[(t, i)] * data.ten.moment[(t, j)];
+            }
+        }
+    }
+    // Reduce to the action joints that muscles drive.
+    let chosen: Vec<usize> = (0..space.joints.len())
+        .filter(|&i| space.servos[i].is_none() && !skip.contains(&space.joints[i]))
+        .collect();
+    let column = |i: usize| -> Vec<(usize, f64)> {
+        let dof = model.joints[space.joints[i]].dof_adr;
+        let r = data
+            .independent_dofs
+            .iter()
+            .position(|&d| d == dof)
+            .expect("independent joint");
+        data.coupling_columns[r].clone()
+    };
+    let cols: Vec<Vec<(usize, f64)>> = chosen.iter().map(|&i| column(i)).collect();
+    let n = chosen.len();
+    let mut kr: nalgebra::DMatrix<f64> = nalgebra::DMatrix::zeros(n, n);
+    let mut tr: DVector<f64> = DVector::zeros(n);
+    for a in 0..n {
+        tr[a] = cols[a].iter().map(|&(i, w)| w * tau[i]).sum::<f64>();
+        for b in 0..n {
+            let mut v = 0.0;
+            for &(i, wa) in &cols[a] {
+                for &(j, wb) in &cols[b] {
+                    v += wa * wb * k[(i, j)];
+                }
+            }
+            kr[(a, b)] = v;
+        }
+        kr[(a, a)] += 1e-3;
+    }
+    let dz = kr
+        .cholesky()
+        .map(|ch| ch.solve(&tr))
+        .unwrap_or_else(|| DVector::zeros(n));
+    let mut out = vec![0.0; space.joints.len()];
+    for (a, &i) in chosen.iter().enumerate() {
+        out[i] = dz[a].clamp(-0.5, 0.5);
+    }
+    out
+}

@@ -17,7 +17,7 @@ use sim::predict::BounceModel;
 use sim::rng::Rng;
 use sim::robot::Robot;
 
-use crate::controller::{Kmac, PdGains};
+use crate::controller::{gravity_offset, Kmac, PdGains};
 use crate::ik::{BladeTarget, PaddleIk};
 use crate::planner::{self, Plan};
 
@@ -47,23 +47,27 @@ pub struct ScriptedParams {
     pub grip_activation: Option<f64>,
     /// Outer joint-space loop on K-MAC's targets: proportional gain on the tracking error.
     pub outer_kp: f64,
-    /// Outer loop: integral gain, 1/s (removes the sag that a pure length PD leaves under gravity).
+    /// Outer loop: integral gain, 1/s (removes what sag the gravity feed-forward leaves).
     pub outer_ki: f64,
+    /// Lead K-MAC's targets by the offset that holds them against gravity (see
+    /// `controller::gravity_offset`).
+    pub gravity_feedforward: bool,
 }
 
 impl Default for ScriptedParams {
     fn default() -> Self {
         ScriptedParams {
             gains: PdGains { kp: 40.0, kd: 3.0 },
-            swing_time: 0.16,
-            backswing: 0.06,
-            lead: 0.03,
+            swing_time: 0.24,
+            backswing: 0.12,
+            lead: 0.15,
             candidates: 12,
             drive: false,
             grip_target: 1.05,
             grip_activation: Some(0.03),
-            outer_kp: 0.5,
-            outer_ki: 4.0,
+            outer_kp: 0.25,
+            outer_ki: 0.0,
+            gravity_feedforward: true,
         }
     }
 }
@@ -75,6 +79,8 @@ struct Stroke {
     bounced: bool,
     z_pre: Vec<f64>,
     z_post: Vec<f64>,
+    /// Gravity feed-forward at the strike posture.
+    offset: Vec<f64>,
 }
 
 /// A scripted agent for one robot.
@@ -92,6 +98,8 @@ pub struct Scripted {
     targets: Vec<f64>,
     integral: Vec<f64>,
     follow_until: f64,
+    data: sim::dynamics::Data,
+    ready_offset: Vec<f64>,
 }
 
 impl Scripted {
@@ -116,6 +124,19 @@ impl Scripted {
             .map(|&j| ready[model.joints[j].qpos_adr])
             .collect();
         let integral = vec![0.0; targets.len()];
+        let mut data = sim::dynamics::Data::new(model);
+        let ready_offset = if params.gravity_feedforward {
+            gravity_offset(
+                model,
+                &mut data,
+                &kmac.space,
+                &params.gains,
+                &ready,
+                &exclude,
+            )
+        } else {
+            vec![0.0; targets.len()]
+        };
         Scripted {
             params,
             kmac,
@@ -128,6 +149,8 @@ impl Scripted {
             targets,
             integral,
             follow_until: f64::NEG_INFINITY,
+            data,
+            ready_offset,
         }
     }
 
@@ -215,11 +238,25 @@ impl Scripted {
             },
             100,
         );
+        let offset = if self.params.gravity_feedforward {
+            let skip: Vec<usize> = self.grip_joint.into_iter().collect();
+            gravity_offset(
+                model,
+                &mut self.data,
+                &self.kmac.space,
+                &self.params.gains,
+                &pre.qpos,
+                &skip,
+            )
+        } else {
+            vec![0.0; self.targets.len()]
+        };
         Some(Stroke {
             t_hit: t + plan.t_strike,
             bounced,
             z_pre: self.targets_of(model, &pre.qpos),
             z_post: self.targets_of(model, &post.qpos),
+            offset,
         })
     }
 
@@ -281,9 +318,19 @@ impl Scripted {
                 self.targets[i] = self.params.grip_target;
             }
         }
-        // Outer loop: K-MAC's targets lead the desired joints by the tracking error and its integral.
+        // Feed-forward: lead the targets by what holds them against gravity; outer loop: by the
+        // tracking error and its integral.
         let dt = arena::CONTROL_DT;
-        let mut command = self.targets.clone();
+        let offset = match &self.stroke {
+            Some(s) => &s.offset,
+            None => &self.ready_offset,
+        };
+        let mut command: Vec<f64> = self
+            .targets
+            .iter()
+            .zip(offset)
+            .map(|(z, o)| z + o)
+            .collect();
         for (i, &j) in self.kmac.space.joints.iter().enumerate() {
             if self.kmac.space.servos[i].is_some() || Some(j) == self.grip_joint {
                 continue;
@@ -311,7 +358,7 @@ pub fn variants() -> Vec<(&'static str, ScriptedParams)> {
             "scripted-drive",
             ScriptedParams {
                 drive: true,
-                backswing: 0.10,
+                backswing: 0.15,
                 ..base.clone()
             },
         ),
@@ -319,7 +366,6 @@ pub fn variants() -> Vec<(&'static str, ScriptedParams)> {
             "scripted-soft",
             ScriptedParams {
                 gains: PdGains { kp: 20.0, kd: 2.0 },
-                lead: 0.05,
                 ..base
             },
         ),

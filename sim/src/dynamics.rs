@@ -323,7 +323,7 @@ impl Data {
     }
 
     /// Refreshes the coupling columns of `T` at `qpos` and `Ṫ·q̇_r` at `qvel`.
-    fn update_couplings(&mut self, model: &Model, qpos: &[f64], qvel: &[f64]) {
+    pub fn update_couplings(&mut self, model: &Model, qpos: &[f64], qvel: &[f64]) {
         self.tdot_v.fill(0.0);
         for c in &model.couplings {
             let ind = &model.joints[c.independent];

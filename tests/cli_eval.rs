@@ -1,0 +1,55 @@
+//! `rally eval` through the binary: JSON output, determinism, bad arguments.
+
+use std::process::{Command, Output};
+
+fn rally(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(args)
+        .output()
+        .expect("rally runs")
+}
+
+#[test]
+fn eval_prints_rates_with_intervals_and_repeats_itself() {
+    let args = [
+        "eval",
+        "scripted",
+        "--episodes",
+        "12",
+        "--seed",
+        "4",
+        "--json",
+    ];
+    let out = rally(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["episodes"], 12);
+    for key in ["hit_rate", "success_rate", "effort", "mean_activation"] {
+        let (lo, x, hi) = (
+            v[key]["low"].as_f64().unwrap(),
+            v[key]["value"].as_f64().unwrap(),
+            v[key]["high"].as_f64().unwrap(),
+        );
+        assert!(lo <= x && x <= hi, "{key}: {lo} {x} {hi}");
+    }
+    assert_eq!(rally(&args).stdout, out.stdout);
+    let table = rally(&["eval", "scripted-drive", "--episodes", "4", "--serve", "p1"]);
+    assert!(String::from_utf8_lossy(&table.stdout).contains("hit rate"));
+}
+
+#[test]
+fn eval_refuses_unknown_agents_and_bad_counts() {
+    for args in [
+        vec!["eval", "nobody", "--episodes", "3"],
+        vec!["eval", "scripted", "--episodes", "0"],
+        vec!["eval", "scripted", "--serve", "p7"],
+    ] {
+        let out = rally(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(out.stdout.is_empty());
+    }
+}
