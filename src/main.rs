@@ -25,6 +25,8 @@ enum Command {
     Bench(cmd::bench::BenchArgs),
     /// Evaluate an agent on seeded single-serve episodes: hit and success rates, effort.
     Eval(cmd::eval::EvalArgs),
+    /// Play a match of dual-robot rallies between two agents: rallies, points, drift, replay.
+    Match(cmd::matchcmd::MatchArgs),
     /// Inspect an MJCF model, or print its muscle lengths and moment arms at a configuration.
     Model(cmd::model::ModelArgs),
     /// The physics-based planner's racket command for a ball (paper §IV-B), as JSON.
@@ -38,6 +40,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => cmd::bench::run(&args),
         Command::Model(args) => cmd::model::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
+        Command::Match(args) => cmd::matchcmd::run(&args),
         Command::Plan(args) => cmd::plan::run(&args),
     };
     match result {

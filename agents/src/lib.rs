@@ -12,6 +12,7 @@
 pub mod controller;
 pub mod eval;
 pub mod ik;
+pub mod matchrun;
 pub mod planner;
 pub mod player;
 pub mod scripted;

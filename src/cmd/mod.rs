@@ -4,6 +4,7 @@
 pub mod ball;
 pub mod bench;
 pub mod eval;
+pub mod matchcmd;
 pub mod model;
 pub mod plan;
 

@@ -1,0 +1,430 @@
+//! The match runner (DESIGN §7–8): two players, `n` rallies with alternating servers in the dual arena,
+//! each rally's length, server, end and failing side, every hitting-plane crossing, the trajectory
+//! drift statistics, and a replay at 50 Hz. A match is a deterministic function of (simulator version,
+//! preset, players, seed): same inputs, same bytes.
+
+use std::sync::Arc;
+
+use serde::Serialize;
+use sim::arena::{Preset, Side};
+use sim::config::ArenaConfig;
+use sim::episode::{Crossing, Rally};
+use sim::model::Model;
+use sim::rng::Rng;
+
+use crate::eval::episode_seeds;
+use crate::player::{Player, PlayerSpec};
+
+/// Replay frames per second (every second control step).
+pub const REPLAY_HZ: usize = 50;
+
+/// A match to play.
+#[derive(Debug, Clone)]
+pub struct MatchSpec {
+    /// The robot model both sides use.
+    pub model: Arc<Model>,
+    /// Arena constants (grip, rally cap).
+    pub config: ArenaConfig,
+    /// Contact laws.
+    pub preset: Preset,
+    /// Rallies to play; A serves the even ones, B the odd ones.
+    pub rallies: u32,
+    /// Match seed.
+    pub seed: u64,
+    /// Record replay frames.
+    pub replay: bool,
+}
+
+/// One crossing as recorded.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CrossingRecord {
+    /// Side receiving the ball ("a" or "b").
+    pub receiver: &'static str,
+    /// 0 for the serve, k for the k-th return.
+    pub exchange: u32,
+    /// Receiver-frame lateral position, m.
+    pub y_r: f64,
+    /// Height, m.
+    pub z: f64,
+    /// Inside the serve box.
+    pub in_box: bool,
+    /// Extrapolated (the receiver hit the ball before the plane).
+    pub extrapolated: bool,
+}
+
+impl From<&Crossing> for CrossingRecord {
+    fn from(c: &Crossing) -> Self {
+        CrossingRecord {
+            receiver: c.receiver.name(),
+            exchange: c.exchange,
+            y_r: c.y_r,
+            z: c.z,
+            in_box: c.in_box,
+            extrapolated: c.extrapolated,
+        }
+    }
+}
+
+/// One rally.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RallyRecord {
+    /// 0-based index in the match.
+    pub index: u32,
+    /// Who served.
+    pub server: &'static str,
+    /// Legal returns.
+    pub length: u32,
+    /// How it ended (a failure's name or CAPPED).
+    pub end: &'static str,
+    /// Who failed (null when capped).
+    pub failing_side: Option<&'static str>,
+    /// Simulated duration, s.
+    pub duration: f64,
+    /// Every incoming ball's crossing of its receiver's plane.
+    pub crossings: Vec<CrossingRecord>,
+}
+
+/// Mean and covariance of `(y_r, z)` samples.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Moments {
+    /// Samples.
+    pub n: usize,
+    /// Mean `(y_r, z)`.
+    pub mean: [f64; 2],
+    /// Covariance `[[yy, yz], [yz, zz]]` (zero below two samples).
+    pub cov: [[f64; 2]; 2],
+}
+
+/// Trajectory drift statistics (DESIGN §7).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DriftStats {
+    /// Crossings counted.
+    pub crossings: usize,
+    /// Fraction of them inside the serve box.
+    pub in_box_fraction: f64,
+    /// Moments per exchange index (0 = serves).
+    pub by_exchange: Vec<Moments>,
+    /// Energy distance between the serves' crossings and the returns' crossings (null without both).
+    pub energy_distance: Option<f64>,
+    /// Least-squares slope of the energy distance between the serves and exchange k, over k ≥ 1 (null
+    /// with fewer than two exchange indices that have returns).
+    pub drift_slope: Option<f64>,
+}
+
+fn moments(points: &[[f64; 2]]) -> Moments {
+    let n = points.len();
+    if n == 0 {
+        return Moments {
+            n,
+            mean: [0.0; 2],
+            cov: [[0.0; 2]; 2],
+        };
+    }
+    let mean = [
+        points.iter().map(|p| p[0]).sum::<f64>() / n as f64,
+        points.iter().map(|p| p[1]).sum::<f64>() / n as f64,
+    ];
+    let mut cov = [[0.0; 2]; 2];
+    if n > 1 {
+        for p in points {
+            let d = [p[0] - mean[0], p[1] - mean[1]];
+            for i in 0..2 {
+                for j in 0..2 {
+                    cov[i][j] += d[i] * d[j] / (n - 1) as f64;
+                }
+            }
+        }
+    }
+    Moments { n, mean, cov }
+}
+
+/// Energy distance `2·E|X − Y| − E|X − X'| − E|Y − Y'|` between two samples (Székely's statistic).
+pub fn energy_distance(x: &[[f64; 2]], y: &[[f64; 2]]) -> Option<f64> {
+    if x.is_empty() || y.is_empty() {
+        return None;
+    }
+    let dist = |a: &[f64; 2], b: &[f64; 2]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    let mean_between = |a: &[[f64; 2]], b: &[[f64; 2]]| {
+        a.iter()
+            .flat_map(|p| b.iter().map(move |q| dist(p, q)))
+            .sum::<f64>()
+            / (a.len() * b.len()) as f64
+    };
+    Some(2.0 * mean_between(x, y) - mean_between(x, x) - mean_between(y, y))
+}
+
+/// Drift statistics of a set of crossings.
+pub fn drift_stats(crossings: &[CrossingRecord]) -> DriftStats {
+    let max_ex = crossings.iter().map(|c| c.exchange).max().unwrap_or(0);
+    let at = |k: u32| -> Vec<[f64; 2]> {
+        crossings
+            .iter()
+            .filter(|c| c.exchange == k)
+            .map(|c| [c.y_r, c.z])
+            .collect()
+    };
+    let serves = at(0);
+    let returns: Vec<[f64; 2]> = crossings
+        .iter()
+        .filter(|c| c.exchange > 0)
+        .map(|c| [c.y_r, c.z])
+        .collect();
+    let by_exchange: Vec<Moments> = (0..=max_ex).map(|k| moments(&at(k))).collect();
+    let per_k: Vec<(f64, f64)> = (1..=max_ex)
+        .filter_map(|k| energy_distance(&serves, &at(k)).map(|e| (k as f64, e)))
+        .collect();
+    let drift_slope = (per_k.len() >= 2).then(|| {
+        let n = per_k.len() as f64;
+        let (mx, my) = (
+            per_k.iter().map(|p| p.0).sum::<f64>() / n,
+            per_k.iter().map(|p| p.1).sum::<f64>() / n,
+        );
+        let sxx: f64 = per_k.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let sxy: f64 = per_k.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        sxy / sxx
+    });
+    DriftStats {
+        crossings: crossings.len(),
+        in_box_fraction: if crossings.is_empty() {
+            0.0
+        } else {
+            crossings.iter().filter(|c| c.in_box).count() as f64 / crossings.len() as f64
+        },
+        by_exchange,
+        energy_distance: energy_distance(&serves, &returns),
+        drift_slope,
+    }
+}
+
+/// A replay frame: ball, both paddles (position and quaternion w, x, y, z) and both robots' qpos.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Frame {
+    /// Time in the rally, s.
+    pub t: f64,
+    /// Ball centre.
+    pub ball: [f64; 3],
+    /// Paddle A: position then quaternion.
+    pub paddle_a: [f64; 7],
+    /// Paddle B.
+    pub paddle_b: [f64; 7],
+    /// Robot A's joint positions.
+    pub qpos_a: Vec<f64>,
+    /// Robot B's joint positions.
+    pub qpos_b: Vec<f64>,
+}
+
+/// Everything a match produced.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MatchRecord {
+    /// Player A's name.
+    pub a: String,
+    /// Player B's name.
+    pub b: String,
+    /// Match seed.
+    pub seed: u64,
+    /// Arena preset.
+    pub preset: &'static str,
+    /// Simulator version.
+    pub sim_version: &'static str,
+    /// Rallies.
+    pub rallies: Vec<RallyRecord>,
+    /// Points won by A and by B (a rally is a point for the side that did not fail; CAPPED is none).
+    pub points: [u32; 2],
+    /// Mean rally length (the cooperative score).
+    pub mean_rally_length: f64,
+    /// Longest rally.
+    pub max_rally_length: u32,
+    /// Drift statistics of every crossing in the match.
+    pub drift: DriftStats,
+    /// Drift of the returns each player produced (crossings at the opponent's plane, exchange ≥ 1, plus
+    /// all serves as the reference): [A, B].
+    pub drift_by_player: [DriftStats; 2],
+}
+
+/// Replay frames of each rally, at [`REPLAY_HZ`].
+pub type Replay = Vec<Vec<Frame>>;
+
+fn frame(rally: &Rally, t0: f64) -> Frame {
+    let pose = |r: &sim::robot::Robot| {
+        let p = r.ball_paddle();
+        let q = p.pose.rot.quaternion();
+        [p.pose.pos.x, p.pose.pos.y, p.pose.pos.z, q.w, q.i, q.j, q.k]
+    };
+    let b = rally.arena.world.ball.pos;
+    Frame {
+        t: rally.arena.world.time - t0,
+        ball: [b.x, b.y, b.z],
+        paddle_a: pose(&rally.arena.robots[0]),
+        paddle_b: pose(&rally.arena.robots[1]),
+        qpos_a: rally.arena.robots[0].state.qpos.clone(),
+        qpos_b: rally.arena.robots[1].state.qpos.clone(),
+    }
+}
+
+/// Plays a match between `a` (side A) and `b` (side B); `progress(k)` is called after rally k.
+pub fn play_match(
+    spec: &MatchSpec,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+    progress: &mut dyn FnMut(u32),
+) -> Result<(MatchRecord, Replay), String> {
+    let players = [
+        a.build(&spec.model, Side::A, 0)?,
+        b.build(&spec.model, Side::B, 0)?,
+    ];
+    play_match_with(spec, players, [a.name(), b.name()], progress)
+}
+
+/// [`play_match`] with players already built (named for the record).
+pub fn play_match_with(
+    spec: &MatchSpec,
+    mut players: [Box<dyn Player>; 2],
+    names: [String; 2],
+    progress: &mut dyn FnMut(u32),
+) -> Result<(MatchRecord, Replay), String> {
+    let mut rally = Rally::new(spec.model.clone(), &spec.config, spec.preset)?;
+    let nu = spec.model.actuators.len();
+    let mut ctrl = vec![0.0; nu];
+    let mut records = Vec::new();
+    let mut replay: Replay = Vec::new();
+    let mut points = [0u32; 2];
+    for k in 0..spec.rallies {
+        let server = if k % 2 == 0 { Side::A } else { Side::B };
+        let (serve_seed, agent_seed) = episode_seeds(spec.seed, k as usize);
+        rally.reset(server, &mut Rng::seeded(serve_seed), None);
+        let t0 = rally.arena.world.time;
+        for (i, p) in players.iter_mut().enumerate() {
+            p.reset();
+            p.reseed(agent_seed.wrapping_add(i as u64));
+        }
+        let mut frames = Vec::new();
+        let every = (1.0 / (sim::arena::CONTROL_DT * REPLAY_HZ as f64))
+            .round()
+            .max(1.0) as usize;
+        let mut step = 0usize;
+        loop {
+            if spec.replay && step % every == 0 {
+                frames.push(frame(&rally, t0));
+            }
+            let mut invalid = None;
+            for (i, side) in [Side::A, Side::B].into_iter().enumerate() {
+                let robot = &rally.arena.robots[i];
+                ctrl.copy_from_slice(&robot.state.ctrl);
+                let ball = rally.arena.world.ball;
+                let ok = players[i]
+                    .act(robot, &ball, rally.arena.world.time, &mut ctrl)
+                    .is_ok()
+                    && ctrl.iter().all(|c| c.is_finite());
+                if ok {
+                    rally.arena.robots[i].state.ctrl.copy_from_slice(&ctrl);
+                } else if invalid.is_none() {
+                    invalid = Some(side);
+                }
+            }
+            if let Some(side) = invalid {
+                rally.invalid_action(side);
+                break;
+            }
+            step += 1;
+            if rally.step().done {
+                break;
+            }
+        }
+        if spec.replay {
+            frames.push(frame(&rally, t0));
+        }
+        let end = rally.referee.end().expect("a finished rally has an end");
+        if let Some(loser) = end.failing_side {
+            points[match loser {
+                Side::A => 1,
+                Side::B => 0,
+            }] += 1;
+        }
+        records.push(RallyRecord {
+            index: k,
+            server: server.name(),
+            length: rally.referee.rally_length(),
+            end: end.reason.name(),
+            failing_side: end.failing_side.map(Side::name),
+            duration: rally.arena.world.time - t0,
+            crossings: rally.crossings.iter().map(CrossingRecord::from).collect(),
+        });
+        replay.push(frames);
+        progress(k);
+    }
+    let all: Vec<CrossingRecord> = records
+        .iter()
+        .flat_map(|r| r.crossings.iter().copied())
+        .collect();
+    // Player X's returns arrive at the other side's plane; the serves (exchange 0) are the reference.
+    let by = |hitter: Side| -> DriftStats {
+        let receiver = hitter.other().name();
+        let mine: Vec<CrossingRecord> = all
+            .iter()
+            .copied()
+            .filter(|c| c.exchange == 0 || c.receiver == receiver)
+            .collect();
+        drift_stats(&mine)
+    };
+    let lengths: Vec<u32> = records.iter().map(|r| r.length).collect();
+    let [name_a, name_b] = names;
+    let record = MatchRecord {
+        a: name_a,
+        b: name_b,
+        seed: spec.seed,
+        preset: spec.preset.name,
+        sim_version: sim::SIM_VERSION,
+        mean_rally_length: if lengths.is_empty() {
+            0.0
+        } else {
+            lengths.iter().sum::<u32>() as f64 / lengths.len() as f64
+        },
+        max_rally_length: lengths.iter().copied().max().unwrap_or(0),
+        points,
+        drift: drift_stats(&all),
+        drift_by_player: [by(Side::A), by(Side::B)],
+        rallies: records,
+    };
+    Ok((record, replay))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn energy_distance_is_zero_for_equal_samples_and_grows_with_a_shift() {
+        let x = [[0.0, 1.2], [0.3, 1.25], [-0.2, 1.15]];
+        assert!(energy_distance(&x, &x).unwrap().abs() < 1e-12);
+        let shifted: Vec<[f64; 2]> = x.iter().map(|p| [p[0] + 0.5, p[1]]).collect();
+        let far: Vec<[f64; 2]> = x.iter().map(|p| [p[0] + 1.5, p[1]]).collect();
+        let (d1, d2) = (
+            energy_distance(&x, &shifted).unwrap(),
+            energy_distance(&x, &far).unwrap(),
+        );
+        assert!(d1 > 0.0 && d2 > d1);
+        assert!(energy_distance(&x, &[]).is_none());
+    }
+
+    #[test]
+    fn drift_slope_follows_a_growing_offset() {
+        let mut c = Vec::new();
+        for k in 0..4u32 {
+            for i in 0..5 {
+                c.push(CrossingRecord {
+                    receiver: "a",
+                    exchange: k,
+                    y_r: 0.1 * i as f64 + 0.2 * k as f64,
+                    z: 1.2,
+                    in_box: true,
+                    extrapolated: false,
+                });
+            }
+        }
+        let s = drift_stats(&c);
+        assert_eq!(s.by_exchange.len(), 4);
+        assert!((s.by_exchange[0].mean[0] - 0.2).abs() < 1e-12);
+        assert!(s.drift_slope.unwrap() > 0.0);
+        assert_eq!(s.in_box_fraction, 1.0);
+    }
+}

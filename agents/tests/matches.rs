@@ -1,0 +1,111 @@
+//! The match runner: deterministic to the byte, points that follow the failures, crossings and replay
+//! frames recorded, and a player that produces NaN loses its rally with INVALID_ACTION.
+
+use std::sync::Arc;
+
+use agents::matchrun::{play_match, play_match_with, MatchSpec, REPLAY_HZ};
+use agents::player::{InvalidAction, Player, PlayerSpec};
+use sim::ball::BallState;
+use sim::robot::Robot;
+
+fn spec(rallies: u32, seed: u64, replay: bool) -> MatchSpec {
+    MatchSpec {
+        model: Arc::new(
+            sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap(),
+        ),
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        rallies,
+        seed,
+        replay,
+    }
+}
+
+#[test]
+fn matches_repeat_to_the_byte_and_score_the_failures() {
+    let (a, b) = (
+        PlayerSpec::scripted("scripted").unwrap(),
+        PlayerSpec::scripted("scripted-soft").unwrap(),
+    );
+    let (r1, p1) = play_match(&spec(6, 3, true), &a, &b, &mut |_| {}).unwrap();
+    let (r2, p2) = play_match(&spec(6, 3, true), &a, &b, &mut |_| {}).unwrap();
+    assert_eq!(
+        serde_json::to_string(&r1).unwrap(),
+        serde_json::to_string(&r2).unwrap()
+    );
+    assert_eq!(
+        serde_json::to_string(&p1).unwrap(),
+        serde_json::to_string(&p2).unwrap()
+    );
+    let (r3, _) = play_match(&spec(6, 4, false), &a, &b, &mut |_| {}).unwrap();
+    assert_ne!(
+        serde_json::to_string(&r1.rallies).unwrap(),
+        serde_json::to_string(&r3.rallies).unwrap()
+    );
+
+    let mut points = [0, 0];
+    for (k, r) in r1.rallies.iter().enumerate() {
+        assert_eq!(r.server, if k % 2 == 0 { "a" } else { "b" });
+        match r.failing_side {
+            Some("a") => points[1] += 1,
+            Some("b") => points[0] += 1,
+            _ => {}
+        }
+        // Every rally has at least the serve's crossing, and exchange indices never skip.
+        assert_eq!(r.crossings.first().map(|c| c.exchange), Some(0));
+        // Replay at 50 Hz: about duration × 50 frames, each with both robots' joint positions.
+        let frames = &p1[k];
+        let expected = (r.duration * REPLAY_HZ as f64).round() as usize;
+        assert!(
+            frames.len() >= expected && frames.len() <= expected + 2,
+            "{} frames for {} s",
+            frames.len(),
+            r.duration
+        );
+        assert_eq!(frames[0].qpos_a.len(), 25);
+        assert_eq!(frames[0].qpos_b.len(), 25);
+    }
+    assert_eq!(points, r1.points);
+    assert!(r1.drift.crossings >= 6);
+}
+
+/// A player whose policy blew up.
+struct Nan;
+
+impl Player for Nan {
+    fn reset(&mut self) {}
+    fn reseed(&mut self, _: u64) {}
+    fn act(
+        &mut self,
+        _: &Robot,
+        _: &BallState,
+        _: f64,
+        ctrl: &mut [f64],
+    ) -> Result<(), InvalidAction> {
+        ctrl.iter_mut().for_each(|c| *c = f64::NAN);
+        Ok(())
+    }
+}
+
+#[test]
+fn a_player_producing_nan_loses_with_invalid_action_and_nothing_crashes() {
+    let s = spec(2, 1, false);
+    let good = PlayerSpec::scripted("scripted")
+        .unwrap()
+        .build(&s.model, sim::Side::A, 0)
+        .unwrap();
+    let (r, _) = play_match_with(
+        &s,
+        [good, Box::new(Nan)],
+        ["scripted".into(), "nan".into()],
+        &mut |_| {},
+    )
+    .unwrap();
+    for rally in &r.rallies {
+        assert_eq!(
+            (rally.end, rally.failing_side),
+            ("INVALID_ACTION", Some("b"))
+        );
+    }
+    assert_eq!(r.points, [2, 0]);
+}
