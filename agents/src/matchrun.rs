@@ -303,7 +303,7 @@ pub fn play_match_with(
             .max(1.0) as usize;
         let mut step = 0usize;
         loop {
-            if spec.replay && step % every == 0 {
+            if spec.replay && step.is_multiple_of(every) {
                 frames.push(frame(&rally, t0));
             }
             let mut invalid = None;
