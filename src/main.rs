@@ -23,6 +23,8 @@ enum Command {
     Ball(Box<cmd::ball::BallArgs>),
     /// Measure simulator speed against MuJoCo on the same work.
     Bench(cmd::bench::BenchArgs),
+    /// Write a template policy checkpoint, or validate one.
+    Checkpoint(cmd::checkpoint::CheckpointArgs),
     /// Evaluate an agent on seeded single-serve episodes: hit and success rates, effort.
     Eval(cmd::eval::EvalArgs),
     /// Play a match of dual-robot rallies between two agents: rallies, points, drift, replay.
@@ -40,6 +42,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => cmd::bench::run(&args),
         Command::Model(args) => cmd::model::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
+        Command::Checkpoint(args) => cmd::checkpoint::run(&args),
         Command::Match(args) => cmd::matchcmd::run(&args),
         Command::Plan(args) => cmd::plan::run(&args),
     };

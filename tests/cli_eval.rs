@@ -53,3 +53,49 @@ fn eval_refuses_unknown_agents_and_bad_counts() {
         assert!(out.stdout.is_empty());
     }
 }
+
+#[test]
+fn checkpoint_templates_validate_and_play_and_broken_ones_are_named() {
+    let dir = std::env::temp_dir().join(format!("rally-ckpt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("t.json");
+    let out = rally(&[
+        "checkpoint",
+        "template",
+        "--controller",
+        "kmac",
+        "--hidden",
+        "16",
+    ]);
+    assert!(out.status.success());
+    std::fs::write(&file, &out.stdout).unwrap();
+    let f = file.to_str().unwrap();
+    assert!(rally(&["checkpoint", "validate", f]).status.success());
+    let ev = rally(&["eval", f, "--episodes", "2", "--json"]);
+    assert!(
+        ev.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ev.stderr)
+    );
+    let m = rally(&["match", f, "scripted", "--rallies", "2", "--json"]);
+    assert!(m.status.success(), "{}", String::from_utf8_lossy(&m.stderr));
+    // A checkpoint whose network gives the wrong number of actions.
+    let text = String::from_utf8(out.stdout)
+        .unwrap()
+        .replace("\"kind\":\"kmac\"", "\"kind\":\"direct\"");
+    let bad = dir.join("bad.json");
+    std::fs::write(&bad, text).unwrap();
+    let v = rally(&["checkpoint", "validate", bad.to_str().unwrap()]);
+    assert_eq!(v.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&v.stderr).contains("policy.layers[1].bias"),
+        "{}",
+        String::from_utf8_lossy(&v.stderr)
+    );
+    assert_eq!(
+        rally(&["eval", bad.to_str().unwrap(), "--episodes", "1"])
+            .status
+            .code(),
+        Some(2)
+    );
+}

@@ -540,3 +540,182 @@ pub fn gravity_offset(
     }
     out
 }
+
+/// A controller as a checkpoint names it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ControllerSpec {
+    /// K-MAC with its gains in the paper's form.
+    Kmac {
+        /// Length PD gains.
+        gains: PdGains,
+    },
+    /// Muscle-PD.
+    MusclePd {
+        /// Length PD gains.
+        gains: PdGains,
+    },
+    /// Muscle-PPO's direct controls.
+    Direct,
+    /// DynSyn with its synergy groups.
+    Dynsyn {
+        /// The grouping.
+        synergies: Synergies,
+    },
+}
+
+impl ControllerSpec {
+    /// Its kind.
+    pub fn kind(&self) -> ControllerKind {
+        match self {
+            ControllerSpec::Kmac { .. } => ControllerKind::Kmac,
+            ControllerSpec::MusclePd { .. } => ControllerKind::MusclePd,
+            ControllerSpec::Direct => ControllerKind::Direct,
+            ControllerSpec::Dynsyn { .. } => ControllerKind::Dynsyn,
+        }
+    }
+}
+
+/// Turns a policy's action in [−1, 1]ⁿ into muscle and servo controls through a controller:
+/// joint targets `mid + a·half-range` (±π for unlimited hinges), lengths `lr0 + (a+1)/2·Δl`,
+/// controls `(a+1)/2`, DynSyn weights `1 + a`, servo targets over their control ranges.
+#[derive(Debug, Clone)]
+pub enum ActionMapper {
+    /// K-MAC: one target per independent joint.
+    Kmac(Box<Kmac>),
+    /// Muscle-PD: one length per muscle, then one target per servo.
+    MusclePd(Box<MusclePd>),
+    /// Direct: one control per muscle, then one target per servo.
+    Direct(ActionSpace),
+    /// DynSyn: one value per group, one weight per muscle, one target per servo.
+    Dynsyn(ActionSpace, Synergies),
+}
+
+fn scale(a: f64, lo: f64, hi: f64) -> f64 {
+    let a = a.clamp(-1.0, 1.0);
+    0.5 * (lo + hi) + a * 0.5 * (hi - lo)
+}
+
+fn joint_range(model: &Model, j: usize) -> [f64; 2] {
+    model.joints[j]
+        .range
+        .unwrap_or([-std::f64::consts::PI, std::f64::consts::PI])
+}
+
+fn servo_range(model: &Model, s: usize, j: usize) -> [f64; 2] {
+    model.actuators[s]
+        .ctrlrange
+        .unwrap_or_else(|| joint_range(model, j))
+}
+
+impl ActionMapper {
+    /// The mapper for `spec` on `model`.
+    pub fn new(model: &Model, spec: &ControllerSpec) -> ActionMapper {
+        match spec {
+            ControllerSpec::Kmac { gains } => ActionMapper::Kmac(Kmac::new(model, *gains)),
+            ControllerSpec::MusclePd { gains } => {
+                ActionMapper::MusclePd(MusclePd::new(model, *gains))
+            }
+            ControllerSpec::Direct => ActionMapper::Direct(ActionSpace::new(model)),
+            ControllerSpec::Dynsyn { synergies } => {
+                ActionMapper::Dynsyn(ActionSpace::new(model), synergies.clone())
+            }
+        }
+    }
+
+    fn space(&self) -> &ActionSpace {
+        match self {
+            ActionMapper::Kmac(k) => &k.space,
+            ActionMapper::MusclePd(m) => &m.space,
+            ActionMapper::Direct(s) | ActionMapper::Dynsyn(s, _) => s,
+        }
+    }
+
+    /// Entries of the action vector.
+    pub fn action_dim(&self) -> usize {
+        let s = self.space();
+        let servos = s.servo_joints().count();
+        match self {
+            ActionMapper::Kmac(_) => s.joints.len(),
+            ActionMapper::MusclePd(_) | ActionMapper::Direct(_) => s.muscles.len() + servos,
+            ActionMapper::Dynsyn(_, syn) => syn.groups + s.muscles.len() + servos,
+        }
+    }
+
+    /// Controls for `action` (length [`ActionMapper::action_dim`], entries in [−1, 1]).
+    pub fn controls(
+        &mut self,
+        model: &Model,
+        state: &State,
+        action: &[f64],
+        dt: f64,
+        ctrl: &mut [f64],
+    ) {
+        let servo_targets = |space: &ActionSpace, a: &[f64]| -> Vec<f64> {
+            space
+                .servo_joints()
+                .zip(a)
+                .map(|((j, s), &x)| {
+                    let r = servo_range(model, s, j);
+                    scale(x, r[0], r[1])
+                })
+                .collect()
+        };
+        match self {
+            ActionMapper::Kmac(k) => {
+                let targets: Vec<f64> = k
+                    .space
+                    .joints
+                    .iter()
+                    .zip(&k.space.servos)
+                    .zip(action)
+                    .map(|((&j, servo), &a)| {
+                        let r = match servo {
+                            Some(s) => servo_range(model, *s, j),
+                            None => joint_range(model, j),
+                        };
+                        scale(a, r[0], r[1])
+                    })
+                    .collect();
+                k.controls(model, state, &targets, dt, ctrl);
+            }
+            ActionMapper::MusclePd(m) => {
+                let n = m.space.muscles.len();
+                let lengths: Vec<f64> = m
+                    .space
+                    .muscles
+                    .iter()
+                    .zip(&action[..n])
+                    .map(|(&a, &x)| {
+                        let lr = model.actuators[a].lengthrange;
+                        lr[0] + 0.5 * (x.clamp(-1.0, 1.0) + 1.0) * (lr[1] - lr[0])
+                    })
+                    .collect();
+                let pelvis = servo_targets(&m.space, &action[n..]);
+                m.controls(model, state, &lengths, &pelvis, dt, ctrl);
+            }
+            ActionMapper::Direct(space) => {
+                let n = space.muscles.len();
+                let u: Vec<f64> = action[..n]
+                    .iter()
+                    .map(|x| 0.5 * (x.clamp(-1.0, 1.0) + 1.0))
+                    .collect();
+                let pelvis = servo_targets(space, &action[n..]);
+                direct_controls(space, &u, &pelvis, ctrl);
+            }
+            ActionMapper::Dynsyn(space, syn) => {
+                let (g, n) = (syn.groups, space.muscles.len());
+                let values: Vec<f64> = action[..g]
+                    .iter()
+                    .map(|x| 0.5 * (x.clamp(-1.0, 1.0) + 1.0))
+                    .collect();
+                let weights: Vec<f64> = action[g..g + n]
+                    .iter()
+                    .map(|x| 1.0 + x.clamp(-1.0, 1.0))
+                    .collect();
+                let pelvis = servo_targets(space, &action[g + n..]);
+                syn.controls(space, &values, &weights, &pelvis, ctrl);
+            }
+        }
+    }
+}

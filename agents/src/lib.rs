@@ -9,7 +9,9 @@
 //! Depends on `sim` only.
 #![forbid(unsafe_code)]
 
+pub mod checkpoint;
 pub mod controller;
+pub mod env;
 pub mod eval;
 pub mod ik;
 pub mod matchrun;

@@ -62,9 +62,35 @@ pub enum PlayerSpec {
         /// How it plays.
         params: ScriptedParams,
     },
+    /// A validated policy checkpoint.
+    Checkpoint(std::sync::Arc<crate::checkpoint::Checkpoint>),
 }
 
 impl PlayerSpec {
+    /// A scripted variant's name, or else a checkpoint file to read (through `read`) and validate.
+    pub fn resolve(
+        name: &str,
+        model: &Model,
+        read: &dyn Fn(&str) -> std::io::Result<String>,
+    ) -> Result<PlayerSpec, String> {
+        if let Some(s) = PlayerSpec::scripted(name) {
+            return Ok(s);
+        }
+        let text = read(name).map_err(|e| {
+            let names: Vec<&str> = crate::scripted::variants()
+                .iter()
+                .map(|(n, _)| *n)
+                .collect();
+            format!(
+                "'{name}' is neither a scripted agent ({}) nor a readable checkpoint file: {e}",
+                names.join(", ")
+            )
+        })?;
+        let c = crate::checkpoint::Checkpoint::from_json(&text, model)
+            .map_err(|e| format!("checkpoint {name}: {e}"))?;
+        Ok(PlayerSpec::Checkpoint(std::sync::Arc::new(c)))
+    }
+
     /// The scripted variant called `name`, if there is one (see [`crate::scripted::variants`]).
     pub fn scripted(name: &str) -> Option<PlayerSpec> {
         crate::scripted::variants()
@@ -80,6 +106,7 @@ impl PlayerSpec {
     pub fn name(&self) -> String {
         match self {
             PlayerSpec::Scripted { name, .. } => name.clone(),
+            PlayerSpec::Checkpoint(c) => c.name.clone(),
         }
     }
 
@@ -96,6 +123,14 @@ impl PlayerSpec {
                     paddle,
                     params.clone(),
                     bounce,
+                    seed,
+                )))
+            }
+            PlayerSpec::Checkpoint(c) => {
+                c.validate(model).map_err(|e| e.to_string())?;
+                Ok(Box::new(crate::checkpoint::CheckpointPlayer::new(
+                    c.clone(),
+                    model,
                     seed,
                 )))
             }

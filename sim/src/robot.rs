@@ -264,6 +264,14 @@ impl Robot {
         }
     }
 
+    /// How far the paddle is from its place in the hand, m (0 while held).
+    pub fn paddle_offset(&self) -> f64 {
+        match self.phase {
+            GripPhase::Held => 0.0,
+            _ => (self.paddle.pose.pos - self.held_motion().pose.pos).norm(),
+        }
+    }
+
     /// The grip muscles' actuator indices.
     pub fn grip_muscles(&self) -> &[usize] {
         &self.grip_muscles

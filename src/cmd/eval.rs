@@ -1,10 +1,7 @@
 //! `rally eval`: hit rate, success rate, effort and mean activation of an agent on seeded
 //! single-serve episodes (paper §V-B), with 95% intervals, a progress bar and all cores.
 
-use std::sync::Arc;
-
 use agents::eval::{evaluate, EvalReport, Evaluation};
-use agents::player::PlayerSpec;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sim::serve::ServeKind;
@@ -18,7 +15,7 @@ use super::{parse_preset, CliError};
                   Example:\n  rally eval scripted --episodes 200 --seed 1 --serve p2"
 )]
 pub struct EvalArgs {
-    /// The agent: a scripted variant's name.
+    /// The agent: a scripted variant's name or a checkpoint file.
     agent: String,
     /// Episodes to play.
     #[arg(long, default_value = "100", value_parser = clap::value_parser!(u64).range(1..=100_000))]
@@ -66,24 +63,8 @@ fn print_table(r: &EvalReport) {
 
 /// Runs `rally eval`.
 pub fn run(args: &EvalArgs) -> Result<(), CliError> {
-    let spec = PlayerSpec::scripted(&args.agent).ok_or_else(|| {
-        let names: Vec<&str> = agents::scripted::variants()
-            .iter()
-            .map(|(n, _)| *n)
-            .collect();
-        CliError::Usage(format!(
-            "unknown agent '{}': expected one of {}",
-            args.agent,
-            names.join(", ")
-        ))
-    })?;
-    let model = Arc::new(
-        sim::mjcf::parse_str(
-            sim::config::DEFAULT_MODEL_XML,
-            "config/models/upper_body.xml",
-        )
-        .map_err(anyhow::Error::from)?,
-    );
+    let model = super::default_model()?;
+    let spec = super::player(&args.agent, &model, "AGENT")?;
     let config = sim::config::ArenaConfig::default();
     let kind = if args.serve == "p1" {
         ServeKind::P1

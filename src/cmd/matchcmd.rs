@@ -3,10 +3,8 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use agents::matchrun::{play_match, MatchRecord, MatchSpec};
-use agents::player::PlayerSpec;
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -41,19 +39,6 @@ pub struct MatchArgs {
     /// Print the match record as one JSON object instead of a table.
     #[arg(long)]
     json: bool,
-}
-
-fn agent(name: &str, which: &str) -> Result<PlayerSpec, CliError> {
-    PlayerSpec::scripted(name).ok_or_else(|| {
-        let names: Vec<&str> = agents::scripted::variants()
-            .iter()
-            .map(|(n, _)| *n)
-            .collect();
-        CliError::Usage(format!(
-            "{which}: unknown agent '{name}': expected one of {}",
-            names.join(", ")
-        ))
-    })
 }
 
 fn print_table(r: &MatchRecord) {
@@ -95,13 +80,10 @@ fn print_table(r: &MatchRecord) {
 
 /// Runs `rally match`.
 pub fn run(args: &MatchArgs) -> Result<(), CliError> {
-    let (a, b) = (agent(&args.a, "A")?, agent(&args.b, "B")?);
-    let model = Arc::new(
-        sim::mjcf::parse_str(
-            sim::config::DEFAULT_MODEL_XML,
-            "config/models/upper_body.xml",
-        )
-        .map_err(anyhow::Error::from)?,
+    let model = super::default_model()?;
+    let (a, b) = (
+        super::player(&args.a, &model, "A")?,
+        super::player(&args.b, &model, "B")?,
     );
     let spec = MatchSpec {
         model,

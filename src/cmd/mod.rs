@@ -3,6 +3,7 @@
 
 pub mod ball;
 pub mod bench;
+pub mod checkpoint;
 pub mod eval;
 pub mod matchcmd;
 pub mod model;
@@ -74,4 +75,24 @@ pub fn parse_preset(s: &str) -> Result<sim::Preset, String> {
             sim::Preset::names().join(", ")
         )
     })
+}
+
+/// The default robot model compiled into the simulator.
+pub fn default_model() -> Result<std::sync::Arc<sim::model::Model>, CliError> {
+    let m = sim::mjcf::parse_str(
+        sim::config::DEFAULT_MODEL_XML,
+        "config/models/upper_body.xml",
+    )
+    .map_err(anyhow::Error::from)?;
+    Ok(std::sync::Arc::new(m))
+}
+
+/// An agent argument: a scripted variant's name or a checkpoint file (a usage error names `which`).
+pub fn player(
+    name: &str,
+    model: &sim::model::Model,
+    which: &str,
+) -> Result<agents::player::PlayerSpec, CliError> {
+    agents::player::PlayerSpec::resolve(name, model, &|p| std::fs::read_to_string(p))
+        .map_err(|e| CliError::Usage(format!("{which}: {e}")))
 }

@@ -1,0 +1,416 @@
+//! Policy checkpoints (DESIGN §8): versioned JSON holding the controller (kind and gains — K-MAC's in
+//! the paper's form), the observation spec and its normalisation, and an MLP of any depth (elu, tanh,
+//! relu or linear layers). Loading validates everything against the arena's model and refuses with a
+//! message that names the field: wrong dimensions, unknown kind, non-finite weights, too large.
+
+use serde::{Deserialize, Serialize};
+use sim::ball::BallState;
+use sim::model::Model;
+use sim::robot::Robot;
+
+use crate::controller::{ActionMapper, ActionSpace, ControllerSpec};
+use crate::env::{ObsBlock, Observer};
+use crate::player::{InvalidAction, Player};
+
+/// The format tag every checkpoint carries.
+pub const FORMAT: &str = "muscle-rally-checkpoint";
+/// The newest format version this build reads.
+pub const VERSION: u32 = 1;
+/// Largest checkpoint file accepted, bytes.
+pub const MAX_BYTES: usize = 64 << 20;
+/// Most parameters accepted.
+pub const MAX_PARAMETERS: usize = 4_000_000;
+
+/// An activation function.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Activation {
+    /// x
+    Linear,
+    /// max(0, x)
+    Relu,
+    /// tanh(x)
+    Tanh,
+    /// x for x > 0, eˣ − 1 otherwise.
+    Elu,
+}
+
+impl Activation {
+    fn apply(self, x: f64) -> f64 {
+        match self {
+            Activation::Linear => x,
+            Activation::Relu => x.max(0.0),
+            Activation::Tanh => x.tanh(),
+            Activation::Elu => {
+                if x > 0.0 {
+                    x
+                } else {
+                    x.exp_m1()
+                }
+            }
+        }
+    }
+}
+
+/// One dense layer: `y = act(W·x + b)`, `W` given row by row (outputs × inputs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Layer {
+    /// Weights, one row per output.
+    pub weights: Vec<Vec<f64>>,
+    /// Biases, one per output.
+    pub bias: Vec<f64>,
+    /// Activation.
+    pub activation: Activation,
+}
+
+/// A multilayer perceptron.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mlp {
+    /// Layers, input first.
+    pub layers: Vec<Layer>,
+}
+
+impl Mlp {
+    /// Evaluates the network.
+    pub fn forward(&self, input: &[f64]) -> Vec<f64> {
+        let mut x = input.to_vec();
+        for l in &self.layers {
+            x = l
+                .weights
+                .iter()
+                .zip(&l.bias)
+                .map(|(row, b)| {
+                    l.activation
+                        .apply(row.iter().zip(&x).map(|(w, v)| w * v).sum::<f64>() + b)
+                })
+                .collect();
+        }
+        x
+    }
+
+    /// Input size (0 for an empty network).
+    pub fn inputs(&self) -> usize {
+        self.layers
+            .first()
+            .and_then(|l| l.weights.first())
+            .map_or(0, |r| r.len())
+    }
+
+    /// Output size.
+    pub fn outputs(&self) -> usize {
+        self.layers.last().map_or(0, |l| l.bias.len())
+    }
+
+    /// Parameters.
+    pub fn parameters(&self) -> usize {
+        self.layers
+            .iter()
+            .map(|l| l.bias.len() * (1 + l.weights.first().map_or(0, |r| r.len())))
+            .sum()
+    }
+}
+
+/// What the policy sees and how it is normalised: `(obs − mean) / std`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObservationSpec {
+    /// Blocks, in order.
+    pub blocks: Vec<ObsBlock>,
+    /// Per-entry mean.
+    pub mean: Vec<f64>,
+    /// Per-entry standard deviation (> 0).
+    pub std: Vec<f64>,
+}
+
+/// A policy checkpoint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Checkpoint {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Format version.
+    pub version: u32,
+    /// Display name.
+    pub name: String,
+    /// How actions become muscle controls.
+    pub controller: ControllerSpec,
+    /// What the policy sees.
+    pub observation: ObservationSpec,
+    /// The network: observation → action in [−1, 1] (outputs are clipped).
+    pub policy: Mlp,
+}
+
+/// Why a checkpoint was refused: the field and what is wrong with it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckpointError {
+    /// JSON path of the offending field, e.g. `policy.layers[1].weights`.
+    pub field: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl std::fmt::Display for CheckpointError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.field, self.message)
+    }
+}
+
+impl std::error::Error for CheckpointError {}
+
+fn bad(field: impl Into<String>, message: impl Into<String>) -> CheckpointError {
+    CheckpointError {
+        field: field.into(),
+        message: message.into(),
+    }
+}
+
+impl Checkpoint {
+    /// Parses and validates a checkpoint for `model`.
+    pub fn from_json(text: &str, model: &Model) -> Result<Checkpoint, CheckpointError> {
+        if text.len() > MAX_BYTES {
+            return Err(bad(
+                "(file)",
+                format!("{} bytes; at most {MAX_BYTES}", text.len()),
+            ));
+        }
+        let c: Checkpoint = serde_json::from_str(text).map_err(|e| {
+            let msg = e.to_string();
+            // serde names unknown variants and fields itself; keep its words.
+            bad(
+                format!("(json line {} column {})", e.line(), e.column()),
+                msg,
+            )
+        })?;
+        c.validate(model)?;
+        Ok(c)
+    }
+
+    /// Checks every field against `model`.
+    pub fn validate(&self, model: &Model) -> Result<(), CheckpointError> {
+        if self.format != FORMAT {
+            return Err(bad(
+                "format",
+                format!("'{}'; expected '{FORMAT}'", self.format),
+            ));
+        }
+        if self.version == 0 || self.version > VERSION {
+            return Err(bad(
+                "version",
+                format!("{}; this build reads versions 1 to {VERSION}", self.version),
+            ));
+        }
+        if self.name.trim().is_empty() || self.name.len() > 100 {
+            return Err(bad("name", "must be 1 to 100 characters"));
+        }
+        let space = ActionSpace::new(model);
+        if let ControllerSpec::Kmac { gains } | ControllerSpec::MusclePd { gains } =
+            &self.controller
+        {
+            if !(gains.kp.is_finite() && gains.kp > 0.0 && gains.kd.is_finite() && gains.kd >= 0.0)
+            {
+                return Err(bad(
+                    "controller.gains",
+                    "kp must be a positive number and kd a number ≥ 0",
+                ));
+            }
+        }
+        if let ControllerSpec::Dynsyn { synergies } = &self.controller {
+            if synergies.group_of.len() != space.muscles.len() {
+                return Err(bad(
+                    "controller.synergies.group_of",
+                    format!(
+                        "{} entries for a model with {} muscles",
+                        synergies.group_of.len(),
+                        space.muscles.len()
+                    ),
+                ));
+            }
+            if synergies.groups == 0 || synergies.group_of.iter().any(|&g| g >= synergies.groups) {
+                return Err(bad(
+                    "controller.synergies",
+                    "group indices must be below `groups` (≥ 1)",
+                ));
+            }
+        }
+        let o = &self.observation;
+        if o.blocks.is_empty() {
+            return Err(bad("observation.blocks", "empty"));
+        }
+        let obs: usize = o.blocks.iter().map(|b| b.size(&space)).sum();
+        for (field, v) in [("observation.mean", &o.mean), ("observation.std", &o.std)] {
+            if v.len() != obs {
+                return Err(bad(
+                    field,
+                    format!("{} entries; the observation has {obs}", v.len()),
+                ));
+            }
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(bad(format!("{field}[{i}]"), "not a finite number"));
+            }
+        }
+        if let Some(i) = o.std.iter().position(|s| *s <= 0.0) {
+            return Err(bad(format!("observation.std[{i}]"), "must be positive"));
+        }
+        let p = &self.policy;
+        if p.layers.is_empty() {
+            return Err(bad("policy.layers", "empty"));
+        }
+        let mut width = obs;
+        let mut params = 0usize;
+        for (k, l) in p.layers.iter().enumerate() {
+            let f = |s: &str| format!("policy.layers[{k}].{s}");
+            if l.weights.is_empty() || l.weights.len() != l.bias.len() {
+                return Err(bad(
+                    f("weights"),
+                    format!("{} rows for {} biases", l.weights.len(), l.bias.len()),
+                ));
+            }
+            if let Some(r) = l.weights.iter().position(|row| row.len() != width) {
+                return Err(bad(
+                    format!("{}[{r}]", f("weights")),
+                    format!(
+                        "{} inputs; the layer below gives {width}",
+                        l.weights[r].len()
+                    ),
+                ));
+            }
+            params += l.bias.len() * (width + 1);
+            if params > MAX_PARAMETERS {
+                return Err(bad(
+                    "policy",
+                    format!("more than {MAX_PARAMETERS} parameters"),
+                ));
+            }
+            if let Some(r) = l
+                .weights
+                .iter()
+                .position(|row| row.iter().any(|x| !x.is_finite()))
+            {
+                return Err(bad(
+                    format!("{}[{r}]", f("weights")),
+                    "holds a NaN or infinite weight",
+                ));
+            }
+            if let Some(i) = l.bias.iter().position(|x| !x.is_finite()) {
+                return Err(bad(format!("{}[{i}]", f("bias")), "not a finite number"));
+            }
+            width = l.bias.len();
+        }
+        let mapper = ActionMapper::new(model, &self.controller);
+        if width != mapper.action_dim() {
+            return Err(bad(
+                format!("policy.layers[{}].bias", p.layers.len() - 1),
+                format!(
+                    "the network gives {width} actions; a {:?} controller on this model takes {}",
+                    self.controller.kind(),
+                    mapper.action_dim()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// A zero-initialised checkpoint of the right shape (a template for users and tests): hidden
+    /// layers of `hidden` units with `activation`, all weights zero, identity normalisation.
+    pub fn template(
+        model: &Model,
+        name: &str,
+        controller: ControllerSpec,
+        hidden: &[usize],
+        activation: Activation,
+    ) -> Checkpoint {
+        let space = ActionSpace::new(model);
+        let blocks = ObsBlock::ALL.to_vec();
+        let obs: usize = blocks.iter().map(|b| b.size(&space)).sum();
+        let out = ActionMapper::new(model, &controller).action_dim();
+        let mut layers = Vec::new();
+        let mut width = obs;
+        for (k, &h) in hidden.iter().chain(std::iter::once(&out)).enumerate() {
+            layers.push(Layer {
+                weights: vec![vec![0.0; width]; h],
+                bias: vec![0.0; h],
+                activation: if k == hidden.len() {
+                    Activation::Linear
+                } else {
+                    activation
+                },
+            });
+            width = h;
+        }
+        Checkpoint {
+            format: FORMAT.into(),
+            version: VERSION,
+            name: name.into(),
+            controller,
+            observation: ObservationSpec {
+                blocks,
+                mean: vec![0.0; obs],
+                std: vec![1.0; obs],
+            },
+            policy: Mlp { layers },
+        }
+    }
+}
+
+/// A checkpoint playing: observe, normalise, run the network, map the action through the controller.
+#[derive(Debug, Clone)]
+pub struct CheckpointPlayer {
+    checkpoint: std::sync::Arc<Checkpoint>,
+    observer: Observer,
+    mapper: ActionMapper,
+    obs: Vec<f64>,
+    seed: u64,
+}
+
+impl CheckpointPlayer {
+    /// A player for `checkpoint` (validated against `model`).
+    pub fn new(
+        checkpoint: std::sync::Arc<Checkpoint>,
+        model: &Model,
+        seed: u64,
+    ) -> CheckpointPlayer {
+        CheckpointPlayer {
+            observer: Observer::new(model, checkpoint.observation.blocks.clone(), seed),
+            mapper: ActionMapper::new(model, &checkpoint.controller),
+            checkpoint,
+            obs: Vec::new(),
+            seed,
+        }
+    }
+}
+
+impl Player for CheckpointPlayer {
+    fn reset(&mut self) {
+        self.observer.reset(self.seed);
+    }
+
+    fn reseed(&mut self, seed: u64) {
+        self.seed = seed;
+        self.observer.reset(seed);
+    }
+
+    fn act(
+        &mut self,
+        robot: &Robot,
+        ball: &BallState,
+        t: f64,
+        ctrl: &mut [f64],
+    ) -> Result<(), InvalidAction> {
+        self.observer.update_command(robot, ball, t);
+        self.observer.observe(robot, ball, t, &mut self.obs);
+        let o = &self.checkpoint.observation;
+        for (x, (m, s)) in self.obs.iter_mut().zip(o.mean.iter().zip(&o.std)) {
+            *x = (*x - m) / s;
+        }
+        let action = self.checkpoint.policy.forward(&self.obs);
+        if action.iter().any(|a| !a.is_finite()) {
+            return Err(InvalidAction);
+        }
+        let model = robot.held_model().clone();
+        self.mapper
+            .controls(&model, &robot.state, &action, sim::arena::CONTROL_DT, ctrl);
+        Ok(())
+    }
+}
