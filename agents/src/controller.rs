@@ -612,9 +612,11 @@ impl ActionMapper {
     /// The mapper for `spec` on `model`.
     pub fn new(model: &Model, spec: &ControllerSpec) -> ActionMapper {
         match spec {
-            ControllerSpec::Kmac { gains } => ActionMapper::Kmac(Kmac::new(model, *gains)),
+            ControllerSpec::Kmac { gains } => {
+                ActionMapper::Kmac(Box::new(Kmac::new(model, *gains)))
+            }
             ControllerSpec::MusclePd { gains } => {
-                ActionMapper::MusclePd(MusclePd::new(model, *gains))
+                ActionMapper::MusclePd(Box::new(MusclePd::new(model, *gains)))
             }
             ControllerSpec::Direct => ActionMapper::Direct(ActionSpace::new(model)),
             ControllerSpec::Dynsyn { synergies } => {
