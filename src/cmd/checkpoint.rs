@@ -68,7 +68,7 @@ pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
                     synergies: Synergies::derive(&model, 16, 0),
                 },
             };
-            if hidden.iter().any(|&h| h == 0) {
+            if hidden.contains(&0) {
                 return Err(CliError::Usage(
                     "--hidden: layer widths must be positive".into(),
                 ));
