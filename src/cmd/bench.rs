@@ -14,6 +14,7 @@ use sim::geometry::Pose;
 use sim::predict::MYOCHALLENGE_BOUNCE;
 use sim::rng::Rng;
 use sim::serve::{self, ServeKind};
+
 use sim::{BallWorld, Paddle};
 
 use super::{parse_seconds, CliError};
@@ -27,6 +28,8 @@ pub enum Target {
     /// Musculoskeletal physics steps per second, single thread: one robot (dynamics, 75 muscles,
     /// grip), and the dual arena (two robots and the ball), from "ready" with every muscle at 0.1.
     Robot,
+    /// Evaluation episodes and match rallies per second per core, with the scripted agent.
+    Agents,
 }
 
 /// Arguments of `rally bench`.
@@ -179,6 +182,60 @@ fn mujoco_steps_per_second(python: &PathBuf, seconds: f64) -> anyhow::Result<(f6
     ))
 }
 
+/// (evaluation episodes/s, match rallies/s, simulated seconds per rally), on one thread.
+fn agent_rates(seconds: f64) -> anyhow::Result<(f64, f64, f64)> {
+    use agents::eval::{evaluate, Evaluation};
+    use agents::matchrun::{play_match, MatchSpec};
+    use agents::player::PlayerSpec;
+    let model = robot_model()?;
+    let config = sim::config::ArenaConfig::default();
+    let spec = PlayerSpec::scripted("scripted").expect("built-in agent");
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let budget = Duration::from_secs_f64(seconds);
+
+    let (mut episodes, mut seed) = (0usize, 0u64);
+    let start = Instant::now();
+    while start.elapsed() < budget {
+        let e = Evaluation {
+            model: model.clone(),
+            config: config.clone(),
+            preset: MYOCHALLENGE,
+            kind: ServeKind::P2,
+            episodes: 20,
+            seed,
+        };
+        episodes += pool
+            .install(|| evaluate(&e, &spec, &|| {}))
+            .map_err(anyhow::Error::msg)?
+            .episodes;
+        seed += 1;
+    }
+    let episodes_per_second = episodes as f64 / start.elapsed().as_secs_f64();
+
+    let (mut rallies, mut simulated, mut seed) = (0usize, 0.0, 0u64);
+    let start = Instant::now();
+    while start.elapsed() < budget {
+        let m = MatchSpec {
+            model: model.clone(),
+            config: config.clone(),
+            preset: MYOCHALLENGE,
+            rallies: 10,
+            seed,
+            replay: false,
+        };
+        let (r, _) = play_match(&m, &spec, &spec, &mut |_| {}).map_err(anyhow::Error::msg)?;
+        rallies += r.rallies.len();
+        simulated += r.rallies.iter().map(|x| x.duration).sum::<f64>();
+        seed += 1;
+    }
+    let rallies_per_second = rallies as f64 / start.elapsed().as_secs_f64();
+    Ok((
+        episodes_per_second,
+        rallies_per_second,
+        simulated / rallies.max(1) as f64,
+    ))
+}
+
 /// Runs `rally bench`.
 pub fn run(args: &BenchArgs) -> Result<(), CliError> {
     match args.target {
@@ -209,6 +266,20 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
                     println!("  MuJoCo {version:<6} {m:>12.0} steps/s  (ball-only reference scene, mj_step nstep)");
                     println!("  ratio         {r:>12.1}x");
                 }
+            }
+            Ok(())
+        }
+        Target::Agents => {
+            let (eps, rps, rally_s) = agent_rates(args.seconds)?;
+            if args.json {
+                println!(
+                    "{}",
+                    json!({"target": "agents", "episodes_per_second": eps, "rallies_per_second": rps, "simulated_seconds_per_rally": rally_s})
+                );
+            } else {
+                println!("scripted agent, one core:");
+                println!("  evaluation    {eps:>8.1} single-serve episodes/s (P2)");
+                println!("  match         {rps:>8.1} rallies/s (scripted vs scripted, {rally_s:.2} simulated s per rally)");
             }
             Ok(())
         }
