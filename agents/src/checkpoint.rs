@@ -1,7 +1,9 @@
 //! Policy checkpoints (DESIGN §8): versioned JSON holding the controller (kind and gains — K-MAC's in
-//! the paper's form), the observation spec and its normalisation, and an MLP of any depth (elu, tanh,
-//! relu or linear layers). Loading validates everything against the arena's model and refuses with a
-//! message that names the field: wrong dimensions, unknown kind, non-finite weights, too large.
+//! the paper's form), the observation spec and its normalisation, and the network: an MLP of any depth
+//! (elu, tanh, relu or linear layers) in `policy`, or — the second format — an ONNX model (observation
+//! batch → action batch, float32) embedded in base64 under `onnx` and run by tract. Loading validates
+//! everything against the arena's model and refuses with a message that names the field: wrong
+//! dimensions, unknown kind, non-finite weights, too large.
 
 use serde::{Deserialize, Serialize};
 use sim::ball::BallState;
@@ -138,8 +140,79 @@ pub struct Checkpoint {
     pub controller: ControllerSpec,
     /// What the policy sees.
     pub observation: ObservationSpec,
-    /// The network: observation → action in [−1, 1] (outputs are clipped).
-    pub policy: Mlp,
+    /// The network as an MLP: observation → action in [−1, 1] (outputs are clipped).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy: Option<Mlp>,
+    /// The network as an ONNX model instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub onnx: Option<OnnxPolicy>,
+}
+
+/// An ONNX network embedded in a checkpoint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OnnxPolicy {
+    /// The `.onnx` file, base64-encoded. Input 0: float32 `[batch, observation]`; output 0: float32
+    /// `[batch, action]`.
+    pub model_base64: String,
+}
+
+type OnnxPlan = std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>;
+
+/// A runnable network.
+#[derive(Clone)]
+pub enum Network {
+    /// The checkpoint's MLP.
+    Mlp(Mlp),
+    /// A loaded ONNX model.
+    Onnx(OnnxPlan, usize),
+}
+
+impl std::fmt::Debug for Network {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Network::Mlp(m) => write!(f, "Mlp({} layers)", m.layers.len()),
+            Network::Onnx(_, n) => write!(f, "Onnx({n} inputs)"),
+        }
+    }
+}
+
+impl Network {
+    /// Evaluates the network on one observation; `None` if the ONNX runtime failed.
+    pub fn forward(&self, obs: &[f64]) -> Option<Vec<f64>> {
+        use tract_onnx::prelude::*;
+        match self {
+            Network::Mlp(m) => Some(m.forward(obs)),
+            Network::Onnx(plan, n) => {
+                let data: Vec<f32> = obs.iter().map(|&x| x as f32).collect();
+                let input = Tensor::from_shape(&[1, *n], &data).ok()?;
+                let out = plan.run(tvec!(input.into())).ok()?;
+                let view = out.first()?.to_plain_array_view::<f32>().ok()?;
+                Some(view.iter().map(|&x| x as f64).collect())
+            }
+        }
+    }
+}
+
+/// Decodes and prepares an embedded ONNX model for observations of `inputs` entries.
+fn load_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError> {
+    use base64::Engine;
+    use tract_onnx::prelude::*;
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(p.model_base64.trim())
+        .map_err(|e| bad("onnx.model_base64", format!("not base64: {e}")))?;
+    let plan = tract_onnx::onnx()
+        .model_for_read(&mut &bytes[..])
+        .and_then(|m| m.with_input_fact(0, f32::fact([1, inputs]).into()))
+        .and_then(|m| m.into_optimized())
+        .and_then(|m| m.into_runnable())
+        .map_err(|e| {
+            bad(
+                "onnx.model_base64",
+                format!("not an ONNX model taking [1, {inputs}] float32: {e}"),
+            )
+        })?;
+    Ok(plan)
 }
 
 /// Why a checkpoint was refused: the field and what is wrong with it.
@@ -253,55 +326,42 @@ impl Checkpoint {
         if let Some(i) = o.std.iter().position(|s| *s <= 0.0) {
             return Err(bad(format!("observation.std[{i}]"), "must be positive"));
         }
-        let p = &self.policy;
-        if p.layers.is_empty() {
-            return Err(bad("policy.layers", "empty"));
-        }
-        let mut width = obs;
-        let mut params = 0usize;
-        for (k, l) in p.layers.iter().enumerate() {
-            let f = |s: &str| format!("policy.layers[{k}].{s}");
-            if l.weights.is_empty() || l.weights.len() != l.bias.len() {
-                return Err(bad(
-                    f("weights"),
-                    format!("{} rows for {} biases", l.weights.len(), l.bias.len()),
-                ));
+        let width = match (&self.policy, &self.onnx) {
+            (Some(p), None) => validate_mlp(p, obs)?,
+            (None, Some(o)) => {
+                let plan = load_onnx(o, obs)?;
+                let probe = Network::Onnx(plan, obs)
+                    .forward(&vec![0.0; obs])
+                    .ok_or_else(|| {
+                        bad(
+                            "onnx.model_base64",
+                            "the model does not run on a zero observation",
+                        )
+                    })?;
+                if probe.iter().any(|x| !x.is_finite()) {
+                    return Err(bad(
+                        "onnx.model_base64",
+                        "the model gives NaN or infinite actions for a zero observation",
+                    ));
+                }
+                probe.len()
             }
-            if let Some(r) = l.weights.iter().position(|row| row.len() != width) {
-                return Err(bad(
-                    format!("{}[{r}]", f("weights")),
-                    format!(
-                        "{} inputs; the layer below gives {width}",
-                        l.weights[r].len()
-                    ),
-                ));
-            }
-            params += l.bias.len() * (width + 1);
-            if params > MAX_PARAMETERS {
+            (Some(_), Some(_)) => {
                 return Err(bad(
                     "policy",
-                    format!("more than {MAX_PARAMETERS} parameters"),
-                ));
+                    "give either `policy` (an MLP) or `onnx`, not both",
+                ))
             }
-            if let Some(r) = l
-                .weights
-                .iter()
-                .position(|row| row.iter().any(|x| !x.is_finite()))
-            {
-                return Err(bad(
-                    format!("{}[{r}]", f("weights")),
-                    "holds a NaN or infinite weight",
-                ));
-            }
-            if let Some(i) = l.bias.iter().position(|x| !x.is_finite()) {
-                return Err(bad(format!("{}[{i}]", f("bias")), "not a finite number"));
-            }
-            width = l.bias.len();
-        }
+            (None, None) => return Err(bad("policy", "missing: give `policy` (an MLP) or `onnx`")),
+        };
         let mapper = ActionMapper::new(model, &self.controller);
         if width != mapper.action_dim() {
+            let field = match &self.policy {
+                Some(p) => format!("policy.layers[{}].bias", p.layers.len() - 1),
+                None => "onnx.model_base64".to_string(),
+            };
             return Err(bad(
-                format!("policy.layers[{}].bias", p.layers.len() - 1),
+                field,
                 format!(
                     "the network gives {width} actions; a {:?} controller on this model takes {}",
                     self.controller.kind(),
@@ -310,6 +370,16 @@ impl Checkpoint {
             ));
         }
         Ok(())
+    }
+
+    /// The runnable network (decodes and prepares an ONNX model).
+    pub fn network(&self) -> Result<Network, CheckpointError> {
+        let inputs = self.observation.mean.len();
+        match (&self.policy, &self.onnx) {
+            (Some(m), _) => Ok(Network::Mlp(m.clone())),
+            (None, Some(o)) => Ok(Network::Onnx(load_onnx(o, inputs)?, inputs)),
+            (None, None) => Err(bad("policy", "missing: give `policy` (an MLP) or `onnx`")),
+        }
     }
 
     /// A zero-initialised checkpoint of the right shape (a template for users and tests): hidden
@@ -349,15 +419,66 @@ impl Checkpoint {
                 mean: vec![0.0; obs],
                 std: vec![1.0; obs],
             },
-            policy: Mlp { layers },
+            policy: Some(Mlp { layers }),
+            onnx: None,
         }
     }
+}
+
+/// Checks an MLP's shapes and values for `obs` inputs; returns its output width.
+fn validate_mlp(p: &Mlp, obs: usize) -> Result<usize, CheckpointError> {
+    if p.layers.is_empty() {
+        return Err(bad("policy.layers", "empty"));
+    }
+    let mut width = obs;
+    let mut params = 0usize;
+    for (k, l) in p.layers.iter().enumerate() {
+        let f = |s: &str| format!("policy.layers[{k}].{s}");
+        if l.weights.is_empty() || l.weights.len() != l.bias.len() {
+            return Err(bad(
+                f("weights"),
+                format!("{} rows for {} biases", l.weights.len(), l.bias.len()),
+            ));
+        }
+        if let Some(r) = l.weights.iter().position(|row| row.len() != width) {
+            return Err(bad(
+                format!("{}[{r}]", f("weights")),
+                format!(
+                    "{} inputs; the layer below gives {width}",
+                    l.weights[r].len()
+                ),
+            ));
+        }
+        params += l.bias.len() * (width + 1);
+        if params > MAX_PARAMETERS {
+            return Err(bad(
+                "policy",
+                format!("more than {MAX_PARAMETERS} parameters"),
+            ));
+        }
+        if let Some(r) = l
+            .weights
+            .iter()
+            .position(|row| row.iter().any(|x| !x.is_finite()))
+        {
+            return Err(bad(
+                format!("{}[{r}]", f("weights")),
+                "holds a NaN or infinite weight",
+            ));
+        }
+        if let Some(i) = l.bias.iter().position(|x| !x.is_finite()) {
+            return Err(bad(format!("{}[{i}]", f("bias")), "not a finite number"));
+        }
+        width = l.bias.len();
+    }
+    Ok(width)
 }
 
 /// A checkpoint playing: observe, normalise, run the network, map the action through the controller.
 #[derive(Debug, Clone)]
 pub struct CheckpointPlayer {
     checkpoint: std::sync::Arc<Checkpoint>,
+    network: Network,
     observer: Observer,
     mapper: ActionMapper,
     obs: Vec<f64>,
@@ -370,14 +491,16 @@ impl CheckpointPlayer {
         checkpoint: std::sync::Arc<Checkpoint>,
         model: &Model,
         seed: u64,
-    ) -> CheckpointPlayer {
-        CheckpointPlayer {
+    ) -> Result<CheckpointPlayer, CheckpointError> {
+        let network = checkpoint.network()?;
+        Ok(CheckpointPlayer {
+            network,
             observer: Observer::new(model, checkpoint.observation.blocks.clone(), seed),
             mapper: ActionMapper::new(model, &checkpoint.controller),
             checkpoint,
             obs: Vec::new(),
             seed,
-        }
+        })
     }
 }
 
@@ -404,7 +527,7 @@ impl Player for CheckpointPlayer {
         for (x, (m, s)) in self.obs.iter_mut().zip(o.mean.iter().zip(&o.std)) {
             *x = (*x - m) / s;
         }
-        let action = self.checkpoint.policy.forward(&self.obs);
+        let action = self.network.forward(&self.obs).ok_or(InvalidAction)?;
         if action.iter().any(|a| !a.is_finite()) {
             return Err(InvalidAction);
         }

@@ -128,11 +128,9 @@ impl PlayerSpec {
             }
             PlayerSpec::Checkpoint(c) => {
                 c.validate(model).map_err(|e| e.to_string())?;
-                Ok(Box::new(crate::checkpoint::CheckpointPlayer::new(
-                    c.clone(),
-                    model,
-                    seed,
-                )))
+                let p = crate::checkpoint::CheckpointPlayer::new(c.clone(), model, seed)
+                    .map_err(|e| e.to_string())?;
+                Ok(Box::new(p))
             }
         }
     }

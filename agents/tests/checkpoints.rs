@@ -79,11 +79,11 @@ fn bad_checkpoints_are_refused_naming_the_field() {
     c.observation.std[3] = 0.0;
     refused(&m, &c, "observation.std[3]");
     let mut c = good.clone();
-    c.policy.layers[0].weights[2].push(0.0);
+    c.policy.as_mut().unwrap().layers[0].weights[2].push(0.0);
     refused(&m, &c, "policy.layers[0].weights[2]");
     let mut c = good.clone();
-    c.policy.layers[1].bias.pop();
-    c.policy.layers[1].weights.pop();
+    c.policy.as_mut().unwrap().layers[1].bias.pop();
+    c.policy.as_mut().unwrap().layers[1].weights.pop();
     refused(&m, &c, "policy.layers[1].bias");
     let mut c = good.clone();
     c.controller = ControllerSpec::Kmac {
@@ -92,7 +92,7 @@ fn bad_checkpoints_are_refused_naming_the_field() {
     refused(&m, &c, "controller.gains");
     // NaN cannot be written in JSON; a checkpoint built in memory is validated all the same.
     let mut c = good.clone();
-    c.policy.layers[0].weights[1][5] = f64::NAN;
+    c.policy.as_mut().unwrap().layers[0].weights[1][5] = f64::NAN;
     assert!(c
         .validate(&m)
         .unwrap_err()

@@ -94,13 +94,19 @@ pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
                 .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
             let kind: ControllerKind = c.controller.kind();
             println!(
-                "{}: valid — '{}', {:?} controller, observation {} entries, {} layers, {} parameters",
+                "{}: valid — '{}', {:?} controller, observation {} entries, {}",
                 file.display(),
                 c.name,
                 kind,
                 c.observation.mean.len(),
-                c.policy.layers.len(),
-                c.policy.parameters()
+                match &c.policy {
+                    Some(p) => format!(
+                        "MLP of {} layers, {} parameters",
+                        p.layers.len(),
+                        p.parameters()
+                    ),
+                    None => "ONNX network".to_string(),
+                }
             );
             Ok(())
         }

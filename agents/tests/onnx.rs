@@ -1,0 +1,112 @@
+//! ONNX as the second checkpoint format: a PyTorch-style MLP exported to ONNX (fixture written by
+//! `tools/make_onnx_policy.py`) runs through tract and matches numpy's outputs; mismatched or broken
+//! models are refused naming the `onnx` field.
+
+use std::sync::Arc;
+
+use agents::checkpoint::{Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
+use agents::controller::{ControllerSpec, PdGains};
+use agents::env::ObsBlock;
+use base64::Engine;
+
+fn model() -> Arc<sim::model::Model> {
+    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+}
+
+fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint {
+    Checkpoint {
+        format: FORMAT.into(),
+        version: VERSION,
+        name: "onnx-fixture".into(),
+        controller: ControllerSpec::Kmac {
+            gains: PdGains { kp: 40.0, kd: 3.0 },
+        },
+        observation: ObservationSpec {
+            blocks,
+            mean: vec![0.0; n],
+            std: vec![1.0; n],
+        },
+        policy: None,
+        onnx: Some(OnnxPolicy {
+            model_base64: base64::engine::general_purpose::STANDARD.encode(bytes),
+        }),
+    }
+}
+
+#[test]
+fn an_onnx_policy_matches_numpy_and_plays() {
+    let m = model();
+    let bytes = include_bytes!("fixtures/policy.onnx");
+    let ck = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, bytes);
+    ck.validate(&m).unwrap_or_else(|e| panic!("{e}"));
+    let text = serde_json::to_string(&ck).unwrap();
+    let ck = Checkpoint::from_json(&text, &m).unwrap();
+    let net = ck.network().unwrap();
+    let expected: serde_json::Value =
+        serde_json::from_str(include_str!("fixtures/policy_expected.json")).unwrap();
+    let rows = |k: &str| -> Vec<Vec<f64>> {
+        expected[k]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| {
+                r.as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            })
+            .collect()
+    };
+    let mut worst: f64 = 0.0;
+    for (x, y) in rows("inputs").iter().zip(rows("outputs")) {
+        let out = net.forward(x).unwrap();
+        assert_eq!(out.len(), 13);
+        for (a, b) in out.iter().zip(&y) {
+            worst = worst.max((a - b).abs() / b.abs().max(1.0));
+        }
+    }
+    assert!(worst < 1e-5, "tract vs numpy: {worst}");
+    let e = agents::eval::Evaluation {
+        model: m.clone(),
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        kind: sim::serve::ServeKind::P2,
+        episodes: 2,
+        seed: 1,
+    };
+    let r = agents::eval::evaluate(
+        &e,
+        &agents::player::PlayerSpec::Checkpoint(Arc::new(ck)),
+        &|| {},
+    )
+    .unwrap();
+    assert_eq!(r.episodes, 2);
+}
+
+#[test]
+fn mismatched_or_broken_onnx_models_are_refused() {
+    let m = model();
+    let bytes = include_bytes!("fixtures/policy.onnx");
+    // The model takes 206 entries; an observation without the planner's command has 195.
+    let blocks: Vec<ObsBlock> = ObsBlock::ALL
+        .iter()
+        .copied()
+        .filter(|b| *b != ObsBlock::Command)
+        .collect();
+    let e = onnx_checkpoint(blocks, 195, bytes)
+        .validate(&m)
+        .unwrap_err();
+    assert!(e.field.starts_with("onnx"), "{e}");
+    let e = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, b"not an onnx file")
+        .validate(&m)
+        .unwrap_err();
+    assert!(e.field.starts_with("onnx"), "{e}");
+    let mut c = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, bytes);
+    c.onnx.as_mut().unwrap().model_base64 = "@@@".into();
+    assert!(c.validate(&m).unwrap_err().message.contains("base64"));
+    // A Direct controller wants 77 actions, the network gives 13.
+    let mut c = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, bytes);
+    c.controller = ControllerSpec::Direct;
+    assert!(c.validate(&m).unwrap_err().message.contains("13 actions"));
+}

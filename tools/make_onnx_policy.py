@@ -1,0 +1,57 @@
+#!/usr/bin/env python3
+"""Writes a small ONNX policy and numpy's outputs for it, the fixture of agents/tests/onnx.rs.
+
+    python tools/make_onnx_policy.py [--obs 206] [--act 13] [--hidden 64] [--out agents/tests/fixtures]
+
+The network is a PyTorch-style MLP (Gemm with transB=1, Tanh, Gemm) with a dynamic batch, random
+weights from a seeded generator; `policy_expected.json` holds five random observations and the actions
+numpy computes for them (float32, as ONNX runs). Needs `pip install onnx numpy`.
+"""
+import argparse
+import json
+import os
+
+import numpy as np
+import onnx
+from onnx import TensorProto, helper, numpy_helper
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--obs", type=int, default=206)
+    ap.add_argument("--act", type=int, default=13)
+    ap.add_argument("--hidden", type=int, default=64)
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "..", "agents", "tests", "fixtures"))
+    args = ap.parse_args()
+    rng = np.random.default_rng(0)
+    w1 = (rng.standard_normal((args.hidden, args.obs)) * 0.1).astype(np.float32)
+    b1 = (rng.standard_normal(args.hidden) * 0.1).astype(np.float32)
+    w2 = (rng.standard_normal((args.act, args.hidden)) * 0.3).astype(np.float32)
+    b2 = (rng.standard_normal(args.act) * 0.1).astype(np.float32)
+    nodes = [
+        helper.make_node("Gemm", ["obs", "w1", "b1"], ["h"], transB=1),
+        helper.make_node("Tanh", ["h"], ["t"]),
+        helper.make_node("Gemm", ["t", "w2", "b2"], ["action"], transB=1),
+    ]
+    graph = helper.make_graph(
+        nodes,
+        "policy",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["batch", args.obs])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, ["batch", args.act])],
+        [numpy_helper.from_array(w1, "w1"), numpy_helper.from_array(b1, "b1"),
+         numpy_helper.from_array(w2, "w2"), numpy_helper.from_array(b2, "b2")],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    onnx.checker.check_model(model)
+    os.makedirs(args.out, exist_ok=True)
+    onnx.save(model, os.path.join(args.out, "policy.onnx"))
+    x = rng.standard_normal((5, args.obs)).astype(np.float32)
+    y = np.tanh(x @ w1.T + b1) @ w2.T + b2
+    with open(os.path.join(args.out, "policy_expected.json"), "w") as f:
+        json.dump({"inputs": x.tolist(), "outputs": y.astype(np.float32).tolist()}, f)
+    print(f"wrote policy.onnx ({args.obs} -> {args.hidden} -> {args.act}) and policy_expected.json to {args.out}")
+
+
+if __name__ == "__main__":
+    main()
