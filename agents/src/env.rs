@@ -411,3 +411,186 @@ impl Env {
         }
     }
 }
+
+/// The dual-rally RL environment (paper §IV-C): the learner plays side A through a controller, an
+/// opponent player plays side B, rallies alternate their server. The reward adds the dual term: +1
+/// when the learner's return crosses B's hitting plane inside the serve box.
+pub struct RallyEnv {
+    /// The rally.
+    pub rally: sim::episode::Rally,
+    /// Observation builder (side A).
+    pub observer: Observer,
+    /// Action → controls (side A).
+    pub mapper: crate::controller::ActionMapper,
+    /// The opponent on side B.
+    pub opponent: Box<dyn crate::player::Player>,
+    /// Reward weights.
+    pub weights: RewardWeights,
+    obs: Vec<f64>,
+    ctrl: Vec<f64>,
+    bounce: BounceModel,
+    crossings_seen: usize,
+    contact_rewarded: bool,
+    rallies: u64,
+}
+
+impl RallyEnv {
+    /// A rally environment for the robot `model` against `opponent`.
+    pub fn new(
+        model: std::sync::Arc<Model>,
+        config: &sim::config::ArenaConfig,
+        preset: sim::Preset,
+        controller: &crate::controller::ControllerSpec,
+        blocks: Vec<ObsBlock>,
+        weights: RewardWeights,
+        opponent: &crate::player::PlayerSpec,
+    ) -> Result<RallyEnv, String> {
+        let rally = sim::episode::Rally::new(model.clone(), config, preset)?;
+        Ok(RallyEnv {
+            observer: Observer::new(&model, blocks, 0),
+            mapper: crate::controller::ActionMapper::new(&model, controller),
+            opponent: opponent.build(&model, Side::B, 0)?,
+            ctrl: vec![0.0; model.actuators.len()],
+            rally,
+            weights,
+            obs: Vec::new(),
+            bounce: BounceModel::for_table(&preset.table),
+            crossings_seen: 0,
+            contact_rewarded: false,
+            rallies: 0,
+        })
+    }
+
+    /// Observation length.
+    pub fn obs_dim(&self) -> usize {
+        self.observer.size()
+    }
+
+    /// Action length.
+    pub fn action_dim(&self) -> usize {
+        self.mapper.action_dim()
+    }
+
+    /// A new rally from `seed` (A serves the even rallies of this environment, B the odd ones).
+    pub fn reset(&mut self, seed: u64) -> Vec<f64> {
+        let (serve_seed, agent_seed) = crate::eval::episode_seeds(seed, 0);
+        let server = if self.rallies.is_multiple_of(2) {
+            Side::A
+        } else {
+            Side::B
+        };
+        self.rallies += 1;
+        self.rally.reset(server, &mut Rng::seeded(serve_seed), None);
+        self.observer.reset(agent_seed);
+        self.opponent.reset();
+        self.opponent.reseed(agent_seed.wrapping_add(1));
+        self.crossings_seen = 0;
+        self.contact_rewarded = false;
+        let (robot, ball, t) = (
+            &self.rally.arena.robots[0],
+            self.rally.arena.world.ball,
+            self.rally.arena.world.time,
+        );
+        self.observer.update_command(robot, &ball, t);
+        self.observer.observe(robot, &ball, t, &mut self.obs);
+        self.obs.clone()
+    }
+
+    /// One control step: the learner's `action` on A, the opponent on B.
+    pub fn step(&mut self, action: &[f64]) -> Transition {
+        if action.len() != self.action_dim() || action.iter().any(|a| !a.is_finite()) {
+            self.rally.invalid_action(Side::A);
+            return Transition {
+                obs: self.obs.clone(),
+                reward: 0.0,
+                terms: RewardTerms::default(),
+                done: true,
+                hit: false,
+                success: false,
+            };
+        }
+        let model = self.rally.arena.robots[0].held_model().clone();
+        let (ball, t) = (self.rally.arena.world.ball, self.rally.arena.world.time);
+        let a = &self.rally.arena.robots[0];
+        self.ctrl.copy_from_slice(&a.state.ctrl);
+        self.mapper
+            .controls(&model, &a.state, action, arena::CONTROL_DT, &mut self.ctrl);
+        self.rally.arena.robots[0]
+            .state
+            .ctrl
+            .copy_from_slice(&self.ctrl);
+        let b = &self.rally.arena.robots[1];
+        self.ctrl.copy_from_slice(&b.state.ctrl);
+        let ok = self.opponent.act(b, &ball, t, &mut self.ctrl).is_ok()
+            && self.ctrl.iter().all(|c| c.is_finite());
+        if ok {
+            self.rally.arena.robots[1]
+                .state
+                .ctrl
+                .copy_from_slice(&self.ctrl);
+        } else {
+            self.rally.invalid_action(Side::B);
+        }
+        let report = self.rally.step();
+        let robot = &self.rally.arena.robots[0];
+        let (ball, t) = (self.rally.arena.world.ball, self.rally.arena.world.time);
+        let mut terms = RewardTerms {
+            grasp: (-(robot.paddle_offset() / GRASP_SCALE).powi(2)).exp(),
+            ..RewardTerms::default()
+        };
+        let contact = report
+            .events
+            .iter()
+            .any(|e| e.kind == sim::ContactKind::Paddle { owner: Side::A });
+        if let Some((plan, _)) = self.observer.command() {
+            let (c, n) = blade(robot);
+            terms.command = pose_term(&c, &n, plan);
+            if contact {
+                terms.command += velocity_term(&robot.paddle.lin_vel, plan);
+            }
+        }
+        if contact {
+            if !self.contact_rewarded {
+                terms.task += 1.0;
+                let local = BallState {
+                    pos: robot.frame.point_from_world(&ball.pos),
+                    vel: robot.frame.vector_from_world(&ball.vel),
+                    spin: ball.spin,
+                };
+                if predicted_legal(&local, &self.bounce) {
+                    terms.task += 1.0;
+                }
+            }
+            self.contact_rewarded = true;
+        }
+        // A new incoming ball for A re-arms the contact reward; A's return crossing B's plane in the
+        // serve box earns the dual term.
+        for c in &self.rally.crossings[self.crossings_seen..] {
+            match c.receiver {
+                Side::B if c.exchange > 0 && c.in_box => terms.dual += 1.0,
+                Side::A => self.contact_rewarded = false,
+                Side::B => {}
+            }
+        }
+        self.crossings_seen = self.rally.crossings.len();
+        self.observer.update_command(robot, &ball, t);
+        self.observer.observe(robot, &ball, t, &mut self.obs);
+        let returns_by_a = report.calls.iter().any(|c| {
+            matches!(
+                c,
+                sim::rules::Call::LegalReturn {
+                    hitter: Side::A,
+                    ..
+                }
+            )
+        });
+        Transition {
+            obs: self.obs.clone(),
+            reward: terms.total(&self.weights),
+            terms,
+            done: report.done,
+            hit: contact,
+            success: returns_by_a,
+        }
+    }
+}

@@ -167,3 +167,36 @@ fn the_rl_environment_is_deterministic_and_survives_nan() {
         "INVALID_ACTION"
     );
 }
+
+#[test]
+fn the_rally_environment_steps_deterministically_against_an_opponent() {
+    use agents::env::RallyEnv;
+    let m = model();
+    let opponent = PlayerSpec::scripted("scripted").unwrap();
+    let mk = || {
+        RallyEnv::new(
+            m.clone(),
+            &sim::config::ArenaConfig::default(),
+            sim::arena::MYOCHALLENGE,
+            &kmac(),
+            ObsBlock::ALL.to_vec(),
+            RewardWeights::default(),
+            &opponent,
+        )
+        .unwrap()
+    };
+    let (mut e1, mut e2) = (mk(), mk());
+    assert_eq!(e1.reset(3), e2.reset(3));
+    let action = vec![0.0; e1.action_dim()];
+    let mut steps = 0;
+    loop {
+        let (t1, t2) = (e1.step(&action), e2.step(&action));
+        assert_eq!(t1, t2);
+        assert!(t1.reward.is_finite());
+        steps += 1;
+        if t1.done {
+            break;
+        }
+    }
+    assert!(steps > 10 && e1.rally.referee.end().is_some());
+}
