@@ -33,6 +33,8 @@ enum Command {
     Model(cmd::model::ModelArgs),
     /// The physics-based planner's racket command for a ball (paper §IV-B), as JSON.
     Plan(cmd::plan::PlanArgs),
+    /// Run the tournament server: REST API, match workers, leaderboard page, SQLite storage.
+    Serve(cmd::serve::ServeArgs),
 }
 
 fn main() -> ExitCode {
@@ -45,6 +47,7 @@ fn main() -> ExitCode {
         Command::Checkpoint(args) => cmd::checkpoint::run(&args),
         Command::Match(args) => cmd::matchcmd::run(&args),
         Command::Plan(args) => cmd::plan::run(&args),
+        Command::Serve(args) => cmd::serve::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,12 +1,165 @@
 //! # server — the tournament service
 //!
-//! Will hold (issue 5): the axum REST API under `/api/v1`, the scheduler and its worker pool, SQLite
-//! storage through sqlx and the `migrations/`, ratings (Bradley–Terry, Glicko-2), replays and the
-//! leaderboard page.
+//! An axum service on SQLite (sqlx, `migrations/` applied at start): agents (built-in scripted ones
+//! registered on first start), matches queued over REST and played by a bounded pool of workers off
+//! the async runtime, rallies, crossings and replays stored, Bradley–Terry ratings on a leaderboard,
+//! and an HTML page. See `scheduler.rs` for a match's lifecycle.
 //!
 //! Must never: simulate physics or run policies itself (it calls `agents`' match runner), or block the
-//! async runtime with a match. Nothing is implemented here yet.
+//! async runtime with a match.
 #![forbid(unsafe_code)]
+
+pub mod api;
+pub mod db;
+pub mod page;
+pub mod ratings;
+pub mod scheduler;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use serde::Deserialize;
+use sqlx::SqlitePool;
+use tokio::sync::Notify;
 
 /// The agents crate the server schedules matches with.
 pub use agents;
+
+/// The default settings file, `config/default.toml`.
+pub const DEFAULT_SETTINGS_TOML: &str = include_str!("../../config/default.toml");
+
+/// Server settings (`config/default.toml`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Listen address.
+    pub addr: SocketAddr,
+    /// SQLite database file (created if missing).
+    pub db: PathBuf,
+    /// Match workers (each a blocking thread).
+    pub workers: usize,
+    /// Keep scheduling matches between the agents with the fewest matches when the queue is empty.
+    pub continuous: bool,
+    /// Rallies per match scheduled by the continuous mode.
+    pub continuous_rallies: u32,
+    /// Least time between two matches queued by the continuous mode, s.
+    pub continuous_pause_s: f64,
+    /// Most rallies a requested match may have.
+    pub max_rallies: u32,
+    /// Qualification episodes run for a submitted agent.
+    pub qualification_episodes: usize,
+    /// Largest request body, bytes.
+    pub max_body_bytes: usize,
+    /// Admin token (the `RALLY_ADMIN_TOKEN` environment variable overrides it); empty disables
+    /// submissions.
+    pub admin_token: String,
+}
+
+impl Settings {
+    /// Parses settings, naming the field that is wrong.
+    pub fn from_toml(text: &str) -> Result<Settings, String> {
+        let s: Settings = toml::from_str(text).map_err(|e| e.to_string())?;
+        if s.workers == 0 || s.workers > 64 {
+            return Err("workers must be between 1 and 64".into());
+        }
+        if s.max_rallies == 0 || s.continuous_rallies == 0 || s.continuous_rallies > s.max_rallies {
+            return Err("max_rallies and continuous_rallies must be positive, continuous_rallies ≤ max_rallies".into());
+        }
+        if !(s.continuous_pause_s.is_finite() && s.continuous_pause_s >= 0.0) {
+            return Err("continuous_pause_s must be a non-negative number of seconds".into());
+        }
+        if s.qualification_episodes == 0 || s.qualification_episodes > 10_000 {
+            return Err("qualification_episodes must be between 1 and 10000".into());
+        }
+        Ok(s)
+    }
+}
+
+/// A leaderboard with the agent count and finished-match count it was computed from.
+pub type CachedBoard = (usize, i64, Arc<ratings::Leaderboard>);
+
+/// Everything the handlers and workers share.
+#[derive(Clone)]
+pub struct AppState {
+    /// The database.
+    pub pool: SqlitePool,
+    /// The robot model both sides play with.
+    pub model: Arc<sim::model::Model>,
+    /// Arena constants.
+    pub arena: sim::config::ArenaConfig,
+    /// Settings.
+    pub settings: Arc<Settings>,
+    /// Wakes the workers when a match is queued.
+    pub wake: Arc<Notify>,
+    /// The last leaderboard computed, with the number of finished matches it was computed from.
+    pub board: Arc<tokio::sync::Mutex<Option<CachedBoard>>>,
+}
+
+/// Opens the database, applies the migrations, re-queues matches a previous process left running,
+/// registers the built-in agents, starts the workers and serves until SIGINT/SIGTERM.
+pub async fn serve(settings: Settings, on_ready: impl FnOnce(SocketAddr)) -> anyhow::Result<()> {
+    let state = start(settings).await?;
+    let listener = tokio::net::TcpListener::bind(state.settings.addr).await?;
+    let addr = listener.local_addr()?;
+    on_ready(addr);
+    let shutdown = Arc::new(Notify::new());
+    let workers = scheduler::spawn_workers(state.clone(), shutdown.clone());
+    let app = api::router(state.clone());
+    axum::serve(listener, app)
+        .with_graceful_shutdown(async move {
+            shutdown_signal().await;
+            shutdown.notify_waiters();
+        })
+        .await?;
+    for w in workers {
+        let _ = w.await;
+    }
+    state.pool.close().await;
+    Ok(())
+}
+
+/// The state of a server: database ready, built-in agents registered.
+pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
+    let pool = db::open(&settings.db).await?;
+    let requeued = db::requeue_running(&pool).await?;
+    if requeued > 0 {
+        tracing::info!(
+            requeued,
+            "re-queued matches left running by a previous process"
+        );
+    }
+    let model = Arc::new(sim::mjcf::parse_str(
+        sim::config::DEFAULT_MODEL_XML,
+        "config/models/upper_body.xml",
+    )?);
+    let state = AppState {
+        pool,
+        model,
+        arena: sim::config::ArenaConfig::default(),
+        settings: Arc::new(settings),
+        wake: Arc::new(Notify::new()),
+        board: Arc::new(tokio::sync::Mutex::new(None)),
+    };
+    db::register_builtins(&state.pool).await?;
+    Ok(state)
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        if let Ok(mut s) = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        {
+            s.recv().await;
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {}
+        _ = term => {}
+    }
+}

@@ -8,6 +8,7 @@ pub mod eval;
 pub mod matchcmd;
 pub mod model;
 pub mod plan;
+pub mod serve;
 
 use nalgebra::Vector3;
 

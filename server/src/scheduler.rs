@@ -1,0 +1,233 @@
+//! The scheduler: `settings.workers` async tasks, each claiming the oldest queued match
+//! (queued → running, one transaction), playing it on a blocking thread with `agents`' match runner,
+//! and storing rallies, crossings, replay and summary with the `done` mark in one transaction (or
+//! marking it `failed`). A match cancelled while running is played out and its result discarded.
+//! A match left `running` by a killed process is re-queued at the next start (`db::requeue_running`):
+//! since results are written only with the `done` mark, none is lost and none counted twice.
+//!
+//! Continuous mode: when the queue is empty a worker queues a match for the agent whose rating
+//! interval is widest (no interval counts as widest), against the opponent it has met least, at most
+//! one every `continuous_pause_s` seconds (replays are stored for every match; the pause keeps an idle
+//! server's database from growing by gigabytes a day).
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use agents::matchrun::{play_match, MatchSpec};
+use agents::player::PlayerSpec;
+use tokio::sync::{Mutex, Notify};
+use tokio::task::JoinHandle;
+
+use crate::{db, ratings, AppState};
+
+/// Builds the player recipe of a stored agent.
+pub fn player_spec(state: &AppState, kind: &str, spec: &str) -> Result<PlayerSpec, String> {
+    match kind {
+        "scripted" => {
+            PlayerSpec::scripted(spec).ok_or_else(|| format!("unknown scripted agent '{spec}'"))
+        }
+        "checkpoint" => agents::checkpoint::Checkpoint::from_json(spec, &state.model)
+            .map(|c| PlayerSpec::Checkpoint(Arc::new(c)))
+            .map_err(|e| e.to_string()),
+        other => Err(format!("unknown agent kind '{other}'")),
+    }
+}
+
+/// Plays stored match `m` to completion (blocking: call it off the async runtime).
+pub fn play(
+    state: &AppState,
+    m: &db::Match,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+) -> Result<(agents::matchrun::MatchRecord, agents::matchrun::Replay), String> {
+    let preset = sim::arena::PRESETS
+        .iter()
+        .find(|p| p.name == m.preset)
+        .copied()
+        .ok_or_else(|| format!("unknown preset '{}'", m.preset))?;
+    if m.sim_version != sim::SIM_VERSION {
+        return Err(format!(
+            "match was queued for simulator {} but this server runs {}",
+            m.sim_version,
+            sim::SIM_VERSION
+        ));
+    }
+    let spec = MatchSpec {
+        model: state.model.clone(),
+        config: state.arena.clone(),
+        preset,
+        rallies: m.rallies as u32,
+        seed: m.seed as u64,
+        replay: true,
+    };
+    play_match(&spec, a, b, &mut |_| {})
+}
+
+async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
+    let spec_of = |id: i64| {
+        let state = state.clone();
+        async move {
+            let row = db::agent_spec(&state.pool, id).await?;
+            let (kind, spec, _) =
+                row.ok_or_else(|| anyhow::anyhow!("agent {id} no longer exists"))?;
+            anyhow::Ok((kind, spec))
+        }
+    };
+    let (ka, sa) = spec_of(m.agent_a).await?;
+    let (kb, sb) = spec_of(m.agent_b).await?;
+    if db::spec_hash(&sa) != m.spec_hash_a || db::spec_hash(&sb) != m.spec_hash_b {
+        db::fail(
+            &state.pool,
+            m.id,
+            "an agent's spec changed since the match was queued",
+        )
+        .await?;
+        return Ok(());
+    }
+    let st = state.clone();
+    let id = m.id;
+    let started = std::time::Instant::now();
+    let result = tokio::task::spawn_blocking(move || {
+        let a = player_spec(&st, &ka, &sa)?;
+        let b = player_spec(&st, &kb, &sb)?;
+        play(&st, &m, &a, &b)
+    })
+    .await;
+    match result {
+        Ok(Ok((record, replay))) => {
+            let stored = db::store_result(&state.pool, id, &record, &replay).await?;
+            tracing::info!(
+                id,
+                points_a = record.points[0],
+                points_b = record.points[1],
+                seconds = started.elapsed().as_secs_f64(),
+                stored,
+                "match finished"
+            );
+        }
+        Ok(Err(e)) => {
+            tracing::warn!(id, error = %e, "match failed");
+            db::fail(&state.pool, id, &e).await?;
+        }
+        Err(join) => {
+            let e = format!("match worker panicked: {join}");
+            tracing::error!(id, error = %e);
+            db::fail(&state.pool, id, &e).await?;
+        }
+    }
+    Ok(())
+}
+
+/// Queues one continuous-mode match if the queue is empty; true if it did.
+async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
+    let queued = db::matches(&state.pool, None, Some("queued"), 1).await?;
+    if !queued.is_empty() {
+        return Ok(false);
+    }
+    let agents = db::agents(&state.pool).await?;
+    if agents.len() < 2 {
+        return Ok(false);
+    }
+    let outcomes = db::outcomes(&state.pool).await?;
+    let board = ratings::leaderboard(&agents, &outcomes);
+    let width = |id: i64| {
+        board
+            .rows
+            .iter()
+            .find(|r| r.agent_id == id)
+            .and_then(|r| Some(r.rating_high? - r.rating_low?))
+            .unwrap_or(f64::INFINITY)
+    };
+    let met = |x: i64, y: i64| {
+        outcomes
+            .iter()
+            .filter(|o| (o.0 == x && o.1 == y) || (o.0 == y && o.1 == x))
+            .count()
+    };
+    let first = agents
+        .iter()
+        .max_by(|p, q| width(p.id).total_cmp(&width(q.id)).then(q.id.cmp(&p.id)))
+        .expect("two agents");
+    let second = agents
+        .iter()
+        .filter(|o| o.id != first.id)
+        .min_by(|p, q| {
+            met(first.id, p.id)
+                .cmp(&met(first.id, q.id))
+                .then(p.id.cmp(&q.id))
+        })
+        .expect("two agents");
+    // Alternate sides so neither agent always serves first.
+    let n = met(first.id, second.id);
+    let (a, b) = if n % 2 == 0 {
+        (first, second)
+    } else {
+        (second, first)
+    };
+    let seed = outcomes.len() as u64 + 1;
+    let id = db::queue_match(&state.pool, a, b, state.settings.continuous_rallies, seed).await?;
+    tracing::debug!(id, a = %a.name, b = %b.name, "continuous mode queued a match");
+    Ok(true)
+}
+
+/// Starts the workers; they stop after `shutdown` is notified (a running match is finished first).
+pub fn spawn_workers(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandle<()>> {
+    // When continuous mode last queued a match (it waits `continuous_pause_s` between them).
+    let queue_lock: Arc<Mutex<Option<std::time::Instant>>> = Arc::new(Mutex::new(None));
+    let stopping = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    {
+        let (shutdown, stopping, wake) = (shutdown.clone(), stopping.clone(), state.wake.clone());
+        tokio::spawn(async move {
+            shutdown.notified().await;
+            stopping.store(true, std::sync::atomic::Ordering::SeqCst);
+            wake.notify_waiters();
+        });
+    }
+    (0..state.settings.workers)
+        .map(|w| {
+            let (state, queue_lock, stopping) =
+                (state.clone(), queue_lock.clone(), stopping.clone());
+            tokio::spawn(async move {
+                while !stopping.load(std::sync::atomic::Ordering::SeqCst) {
+                    let claimed = db::claim(&state.pool).await;
+                    match claimed {
+                        Ok(Some(m)) => {
+                            if let Err(e) = run_one(&state, m).await {
+                                tracing::error!(worker = w, error = %e, "storing a match failed");
+                            }
+                            continue;
+                        }
+                        Ok(None) => {}
+                        Err(e) => {
+                            tracing::error!(worker = w, error = %e, "claiming a match failed")
+                        }
+                    }
+                    if state.settings.continuous {
+                        let mut last = queue_lock.lock().await;
+                        let pause = Duration::from_secs_f64(state.settings.continuous_pause_s);
+                        let due = last.is_none_or(|t| t.elapsed() >= pause);
+                        match if due {
+                            queue_continuous(&state).await
+                        } else {
+                            Ok(false)
+                        } {
+                            Ok(true) => {
+                                *last = Some(std::time::Instant::now());
+                                continue;
+                            }
+                            Ok(false) => {}
+                            Err(e) => {
+                                tracing::error!(worker = w, error = %e, "continuous mode failed")
+                            }
+                        }
+                    }
+                    let notified = state.wake.notified();
+                    if stopping.load(std::sync::atomic::Ordering::SeqCst) {
+                        break;
+                    }
+                    let _ = tokio::time::timeout(Duration::from_secs(1), notified).await;
+                }
+            })
+        })
+        .collect()
+}

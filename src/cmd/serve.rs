@@ -1,0 +1,96 @@
+//! `rally serve`: the tournament server (REST API, scheduler, leaderboard page) on SQLite.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+
+use super::CliError;
+
+/// Arguments of `rally serve`.
+#[derive(Args, Debug)]
+#[command(
+    after_help = "Settings come from the config file (default: config/default.toml, or the built-in copy of it\n\
+                  when that file is missing); --addr, --db, --workers and --no-continuous override it, and\n\
+                  RALLY_ADMIN_TOKEN overrides its admin_token. Logs go to stderr (RUST_LOG=debug for more).\n\n\
+                  On first start the built-in scripted agents are registered and, unless continuous mode is off,\n\
+                  matches between them start at once: open the printed address to watch the leaderboard fill.\n\n\
+                  Example:\n  RALLY_ADMIN_TOKEN=secret rally serve --addr 127.0.0.1:8080 --db data/rally.db"
+)]
+pub struct ServeArgs {
+    /// Settings file (TOML).
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Listen address (port 0 picks a free port).
+    #[arg(long)]
+    addr: Option<SocketAddr>,
+    /// SQLite database file (created with its directory if missing).
+    #[arg(long, value_name = "FILE")]
+    db: Option<PathBuf>,
+    /// Match workers.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
+    workers: Option<u16>,
+    /// Play only requested matches (no continuous matches between the least-rated agents).
+    #[arg(long)]
+    no_continuous: bool,
+}
+
+/// Runs `rally serve`.
+pub fn run(args: &ServeArgs) -> Result<(), CliError> {
+    let default_path = PathBuf::from("config/default.toml");
+    let text = match &args.config {
+        Some(p) => std::fs::read_to_string(p)
+            .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", p.display())))?,
+        None if default_path.exists() => {
+            std::fs::read_to_string(&default_path).context("reading config/default.toml")?
+        }
+        None => server::DEFAULT_SETTINGS_TOML.to_string(),
+    };
+    let name = args
+        .config
+        .as_deref()
+        .unwrap_or(&default_path)
+        .display()
+        .to_string();
+    let mut settings =
+        server::Settings::from_toml(&text).map_err(|e| CliError::Usage(format!("{name}: {e}")))?;
+    if let Some(a) = args.addr {
+        settings.addr = a;
+    }
+    if let Some(d) = &args.db {
+        settings.db = d.clone();
+    }
+    if let Some(w) = args.workers {
+        settings.workers = w as usize;
+    }
+    if args.no_continuous {
+        settings.continuous = false;
+    }
+    if let Ok(t) = std::env::var("RALLY_ADMIN_TOKEN") {
+        settings.admin_token = t;
+    }
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,sqlx=warn,tower_http=warn".into()),
+        )
+        .init();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let db = settings.db.clone();
+    let submissions = !settings.admin_token.is_empty();
+    runtime.block_on(server::serve(settings, |addr| {
+        // The first stdout line is the address (scripts and tests read it).
+        println!("listening on http://{addr}");
+        eprintln!(
+            "rally serve: database {}, leaderboard at http://{addr}/, API at http://{addr}/api/v1{}",
+            db.display(),
+            if submissions { "" } else { " (submissions off: set RALLY_ADMIN_TOKEN)" }
+        );
+    }))?;
+    Ok(())
+}
