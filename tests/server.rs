@@ -1,0 +1,682 @@
+//! The real server (`rally serve`, a child process) on a loopback port with a real SQLite file:
+//! submit and qualify a checkpoint, play matches, read the leaderboard and replays, cancel, kill -9 in
+//! the middle of a match and restart (nothing lost, nothing counted twice), and the bad-input table.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::{json, Value};
+
+const TOKEN: &str = "test-admin-token";
+
+struct Server {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("rally-server-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn start(dir: &Path, continuous: bool) -> Server {
+    let config = dir.join("server.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "addr = \"127.0.0.1:0\"\ndb = \"{}\"\nworkers = 1\ncontinuous = {continuous}\ncontinuous_rallies = 4\n\
+             continuous_pause_s = 0.0\nmax_rallies = 1000\nqualification_episodes = 6\nmax_body_bytes = 65536\nadmin_token = \"\"\n",
+            dir.join("rally.db").display()
+        ),
+    )
+    .unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["serve", "--config"])
+        .arg(&config)
+        .env("RALLY_ADMIN_TOKEN", TOKEN)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("rally serve starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on http://")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string();
+    Server { child, addr }
+}
+
+/// One HTTP/1.1 request (Connection: close); returns (status, body).
+fn raw(
+    addr: &str,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let mut req = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n",
+        body.len()
+    );
+    for (k, v) in headers {
+        req.push_str(&format!("{k}: {v}\r\n"));
+    }
+    req.push_str("\r\n");
+    s.write_all(req.as_bytes()).unwrap();
+    s.write_all(body).unwrap();
+    let mut resp = Vec::new();
+    let _ = s.read_to_end(&mut resp);
+    let split = resp
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("a header block");
+    let head = String::from_utf8_lossy(&resp[..split]).to_string();
+    let mut body = resp[split + 4..].to_vec();
+    let status: u16 = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        let mut out = Vec::new();
+        let mut rest = &body[..];
+        loop {
+            let nl = rest.windows(2).position(|w| w == b"\r\n").unwrap();
+            let n = usize::from_str_radix(std::str::from_utf8(&rest[..nl]).unwrap().trim(), 16)
+                .unwrap();
+            if n == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[nl + 2..nl + 2 + n]);
+            rest = &rest[nl + 2 + n + 2..];
+        }
+        body = out;
+    }
+    (status, body)
+}
+
+fn call(
+    addr: &str,
+    method: &str,
+    path: &str,
+    body: Option<&Value>,
+    token: Option<&str>,
+) -> (u16, Value) {
+    let auth = token.map(|t| format!("Bearer {t}"));
+    let mut headers = vec![];
+    if body.is_some() {
+        headers.push(("Content-Type", "application/json"));
+    }
+    if let Some(a) = &auth {
+        headers.push(("Authorization", a.as_str()));
+    }
+    let bytes = body.map(|b| b.to_string().into_bytes()).unwrap_or_default();
+    let (status, body) = raw(addr, method, path, &headers, &bytes);
+    let v = serde_json::from_slice(&body)
+        .unwrap_or_else(|_| Value::String(String::from_utf8_lossy(&body).into()));
+    (status, v)
+}
+
+fn wait_for(addr: &str, id: i64, status: &str, limit: Duration) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let (code, m) = call(addr, "GET", &format!("/api/v1/matches/{id}"), None, None);
+        assert_eq!(code, 200, "{m}");
+        if m["status"] == status {
+            return m;
+        }
+        assert!(
+            !["failed", "cancelled"].contains(&m["status"].as_str().unwrap())
+                || m["status"] == status,
+            "{m}"
+        );
+        assert!(
+            t0.elapsed() < limit,
+            "match {id} still {} after {limit:?}",
+            m["status"]
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn template(name: &str) -> Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["checkpoint", "template", "--hidden", "16", "--name", name])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn submit_qualify_match_leaderboard_replay_cancel() {
+    let dir = tempdir("flow");
+    let srv = start(&dir, false);
+    let a = srv.addr.as_str();
+
+    let (code, h) = call(a, "GET", "/api/v1/healthz", None, None);
+    assert_eq!((code, h["status"].as_str()), (200, Some("ok")));
+    let (_, agents) = call(a, "GET", "/api/v1/agents", None, None);
+    let builtins = agents["agents"].as_array().unwrap().len();
+    assert!(builtins >= 3, "{agents}");
+
+    // Submit and qualify a checkpoint.
+    let (code, sub) = call(
+        a,
+        "POST",
+        "/api/v1/agents",
+        Some(&json!({"name": "zero-policy", "checkpoint": template("zero")})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 201, "{sub}");
+    assert_eq!(sub["qualification"]["episodes"], 6);
+    let cid = sub["agent"]["id"].as_i64().unwrap();
+    let (code, got) = call(a, "GET", &format!("/api/v1/agents/{cid}"), None, None);
+    assert_eq!(code, 200);
+    assert_eq!(got["name"], "zero-policy");
+    assert!(got["hit_rate"].as_f64().unwrap() >= 0.0);
+
+    // A match between two built-ins reproduces `rally match` bit for bit.
+    let (code, m) = call(
+        a,
+        "POST",
+        "/api/v1/matches",
+        Some(&json!({"a": 1, "b": 2, "rallies": 6, "seed": 7})),
+        None,
+    );
+    assert_eq!(code, 202, "{m}");
+    let id = m["id"].as_i64().unwrap();
+    let done = wait_for(a, id, "done", Duration::from_secs(120));
+    let log = done["rally_log"].as_array().unwrap();
+    assert_eq!(log.len(), 6);
+    let cli = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args([
+            "match",
+            "scripted",
+            "scripted-drive",
+            "--rallies",
+            "6",
+            "--seed",
+            "7",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    let cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
+    assert_eq!(cli["points"], json!([done["points_a"], done["points_b"]]));
+    for (x, y) in cli["rallies"].as_array().unwrap().iter().zip(log) {
+        assert_eq!(x["length"], y["length"]);
+        assert_eq!(x["end"], y["end_reason"]);
+        assert_eq!(x["duration"], y["duration"], "durations are bit-identical");
+    }
+    assert_eq!(
+        cli["drift"]["energy_distance"],
+        done["drift"]["energy_distance"]
+    );
+
+    // Replay frames, gzip on request.
+    let (code, rep) = call(
+        a,
+        "GET",
+        &format!("/api/v1/matches/{id}/replay?rally=1"),
+        None,
+        None,
+    );
+    assert_eq!(code, 200);
+    assert!(rep["frames"].as_array().unwrap().len() > 10);
+    let (code, gz) = raw(
+        a,
+        "GET",
+        &format!("/api/v1/matches/{id}/replay?rally=1"),
+        &[("Accept-Encoding", "gzip")],
+        b"",
+    );
+    assert_eq!(code, 200);
+    assert_eq!(&gz[..2], &[0x1f, 0x8b], "gzip magic");
+    let (code, _) = call(
+        a,
+        "GET",
+        &format!("/api/v1/matches/{id}/replay?rally=6"),
+        None,
+        None,
+    );
+    assert_eq!(code, 400);
+
+    // The checkpoint plays too, and everything shows on the leaderboard.
+    let (_, m2) = call(
+        a,
+        "POST",
+        "/api/v1/matches",
+        Some(&json!({"a": cid, "b": 3, "rallies": 4, "seed": 1})),
+        None,
+    );
+    wait_for(
+        a,
+        m2["id"].as_i64().unwrap(),
+        "done",
+        Duration::from_secs(120),
+    );
+    let (code, board) = call(a, "GET", "/api/v1/leaderboard", None, None);
+    assert_eq!(code, 200);
+    assert_eq!(board["matches"], 2);
+    let rows = board["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), builtins + 1);
+    for r in rows {
+        let played = r["matches"].as_u64().unwrap();
+        assert_eq!(played > 0, r["rating_low"].is_number(), "{r}");
+        if played > 0 {
+            assert!(
+                r["rating_low"].as_f64() <= r["rating"].as_f64()
+                    && r["rating"].as_f64() <= r["rating_high"].as_f64(),
+                "{r}"
+            );
+        }
+    }
+    let (code, list) = call(
+        a,
+        "GET",
+        &format!("/api/v1/matches?agent={cid}&status=done"),
+        None,
+        None,
+    );
+    assert_eq!(code, 200);
+    assert_eq!(list["matches"].as_array().unwrap().len(), 1);
+
+    // Cancelling: a finished match cannot be; a queued or running one can, and stays cancelled.
+    let (code, e) = call(a, "DELETE", &format!("/api/v1/matches/{id}"), None, None);
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (409, Some("not_cancellable"))
+    );
+    let (_, long) = call(
+        a,
+        "POST",
+        "/api/v1/matches",
+        Some(&json!({"a": 1, "b": 3, "rallies": 300, "seed": 3})),
+        None,
+    );
+    let lid = long["id"].as_i64().unwrap();
+    let (code, c) = call(a, "DELETE", &format!("/api/v1/matches/{lid}"), None, None);
+    assert_eq!(
+        (code, c["status"].as_str()),
+        (200, Some("cancelled")),
+        "{c}"
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    let (_, after) = call(a, "GET", &format!("/api/v1/matches/{lid}"), None, None);
+    assert_eq!(after["status"], "cancelled");
+
+    // Metrics and the page.
+    let (code, metrics) = raw(a, "GET", "/api/v1/metrics", &[], b"");
+    assert_eq!(code, 200);
+    assert!(String::from_utf8_lossy(&metrics).contains("rally_matches{status=\"done\"} 2"));
+    let (code, page) = raw(a, "GET", "/", &[], b"");
+    assert_eq!(code, 200);
+    assert!(String::from_utf8_lossy(&page).contains("<table id=\"board\">"));
+    let (code, doc) = call(a, "GET", "/api/v1/openapi.json", None, None);
+    assert_eq!((code, doc["openapi"].as_str()), (200, Some("3.0.3")));
+}
+
+#[test]
+fn continuous_mode_fills_the_leaderboard() {
+    let dir = tempdir("continuous");
+    let srv = start(&dir, true);
+    let t0 = Instant::now();
+    loop {
+        let (_, board) = call(&srv.addr, "GET", "/api/v1/leaderboard", None, None);
+        if board["matches"].as_u64().unwrap() >= 3 {
+            // Every built-in has played (the most uncertain agent is picked first).
+            assert!(
+                board["rows"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .all(|r| r["matches"].as_u64().unwrap() > 0),
+                "{board}"
+            );
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the leaderboard did not fill within a minute: {board}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+#[test]
+fn kill_9_in_the_middle_of_a_match_loses_nothing() {
+    let dir = tempdir("restart");
+    let mut srv = start(&dir, false);
+    let (code, m) = call(
+        &srv.addr,
+        "POST",
+        "/api/v1/matches",
+        Some(&json!({"a": 2, "b": 3, "rallies": 150, "seed": 11})),
+        None,
+    );
+    assert_eq!(code, 202);
+    let id = m["id"].as_i64().unwrap();
+    wait_for(&srv.addr, id, "running", Duration::from_secs(30));
+    srv.child.kill().unwrap(); // SIGKILL: no graceful shutdown
+    srv.child.wait().unwrap();
+    drop(srv);
+
+    let srv = start(&dir, false);
+    let (_, m) = call(
+        &srv.addr,
+        "GET",
+        &format!("/api/v1/matches/{id}"),
+        None,
+        None,
+    );
+    assert!(
+        ["queued", "running"].contains(&m["status"].as_str().unwrap()),
+        "re-queued: {m}"
+    );
+    let done = wait_for(&srv.addr, id, "done", Duration::from_secs(300));
+    let log = done["rally_log"].as_array().unwrap();
+    assert_eq!(log.len(), 150, "every rally stored exactly once");
+    let idx: Vec<i64> = log.iter().map(|r| r["idx"].as_i64().unwrap()).collect();
+    assert_eq!(idx, (0..150).collect::<Vec<_>>());
+    let points = done["points_a"].as_i64().unwrap() + done["points_b"].as_i64().unwrap();
+    assert!(points <= 150);
+    let (_, list) = call(&srv.addr, "GET", "/api/v1/matches", None, None);
+    assert_eq!(
+        list["matches"].as_array().unwrap().len(),
+        1,
+        "no duplicate match"
+    );
+}
+
+#[test]
+fn bad_input_gets_a_json_4xx_and_writes_nothing() {
+    let dir = tempdir("bad");
+    let srv = start(&dir, false);
+    let a = srv.addr.as_str();
+    let good = template("ok");
+    let mut nan_dims = good.clone();
+    // Wrong dimensions: drop one output row of the last layer.
+    let layers = nan_dims["policy"]["layers"].as_array_mut().expect("layers");
+    layers.last_mut().unwrap()["bias"]
+        .as_array_mut()
+        .unwrap()
+        .pop();
+    let json_ct = [("Content-Type", "application/json")];
+    let auth = format!("Bearer {TOKEN}");
+    let authed = [
+        ("Content-Type", "application/json"),
+        ("Authorization", auth.as_str()),
+    ];
+    let big = vec![b'x'; 70_000];
+    let cases: Vec<(&str, &str, &str, Vec<(&str, &str)>, Vec<u8>, u16)> = vec![
+        (
+            "malformed JSON",
+            "POST",
+            "/api/v1/matches",
+            json_ct.to_vec(),
+            b"{\"a\": 1,".to_vec(),
+            400,
+        ),
+        (
+            "wrong content type",
+            "POST",
+            "/api/v1/matches",
+            vec![("Content-Type", "text/plain")],
+            br#"{"a":1,"b":2,"rallies":3}"#.to_vec(),
+            415,
+        ),
+        (
+            "missing field",
+            "POST",
+            "/api/v1/matches",
+            json_ct.to_vec(),
+            br#"{"a":1,"b":2}"#.to_vec(),
+            422,
+        ),
+        (
+            "unknown agent",
+            "POST",
+            "/api/v1/matches",
+            json_ct.to_vec(),
+            br#"{"a":1,"b":999,"rallies":3}"#.to_vec(),
+            404,
+        ),
+        (
+            "zero rallies",
+            "POST",
+            "/api/v1/matches",
+            json_ct.to_vec(),
+            br#"{"a":1,"b":2,"rallies":0}"#.to_vec(),
+            400,
+        ),
+        (
+            "too many rallies",
+            "POST",
+            "/api/v1/matches",
+            json_ct.to_vec(),
+            br#"{"a":1,"b":2,"rallies":1001}"#.to_vec(),
+            400,
+        ),
+        (
+            "negative seed",
+            "POST",
+            "/api/v1/matches",
+            json_ct.to_vec(),
+            br#"{"a":1,"b":2,"rallies":3,"seed":-1}"#.to_vec(),
+            422,
+        ),
+        (
+            "non-numeric id",
+            "GET",
+            "/api/v1/matches/abc",
+            vec![],
+            vec![],
+            400,
+        ),
+        (
+            "unknown match",
+            "GET",
+            "/api/v1/matches/12345",
+            vec![],
+            vec![],
+            404,
+        ),
+        (
+            "unknown agent id",
+            "GET",
+            "/api/v1/agents/77",
+            vec![],
+            vec![],
+            404,
+        ),
+        (
+            "bad status filter",
+            "GET",
+            "/api/v1/matches?status=bogus",
+            vec![],
+            vec![],
+            400,
+        ),
+        (
+            "bad limit",
+            "GET",
+            "/api/v1/matches?limit=0",
+            vec![],
+            vec![],
+            400,
+        ),
+        (
+            "cancel unknown",
+            "DELETE",
+            "/api/v1/matches/999",
+            vec![],
+            vec![],
+            404,
+        ),
+        (
+            "replay of unknown",
+            "GET",
+            "/api/v1/matches/5/replay?rally=x",
+            vec![],
+            vec![],
+            404,
+        ),
+        (
+            "no token",
+            "POST",
+            "/api/v1/agents",
+            json_ct.to_vec(),
+            json!({"name": "x", "checkpoint": good})
+                .to_string()
+                .into_bytes(),
+            401,
+        ),
+        (
+            "bad token",
+            "POST",
+            "/api/v1/agents",
+            vec![
+                ("Content-Type", "application/json"),
+                ("Authorization", "Bearer nope"),
+            ],
+            json!({"name": "x", "checkpoint": good})
+                .to_string()
+                .into_bytes(),
+            401,
+        ),
+        (
+            "SQL in name",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            json!({"name": "x'; DROP TABLE agents;--", "checkpoint": good})
+                .to_string()
+                .into_bytes(),
+            400,
+        ),
+        (
+            "path traversal name",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            json!({"name": "../../etc/passwd", "checkpoint": good})
+                .to_string()
+                .into_bytes(),
+            400,
+        ),
+        (
+            "empty name",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            json!({"name": "", "checkpoint": good})
+                .to_string()
+                .into_bytes(),
+            400,
+        ),
+        (
+            "long name",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            json!({"name": "n".repeat(65), "checkpoint": good})
+                .to_string()
+                .into_bytes(),
+            400,
+        ),
+        (
+            "taken name",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            json!({"name": "scripted", "checkpoint": good})
+                .to_string()
+                .into_bytes(),
+            409,
+        ),
+        (
+            "NaN weight",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            json!({"name": "nan", "checkpoint": good})
+                .to_string()
+                .replacen("0.0", "NaN", 1)
+                .into_bytes(),
+            400,
+        ),
+        (
+            "wrong dimensions",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            json!({"name": "dims", "checkpoint": nan_dims})
+                .to_string()
+                .into_bytes(),
+            422,
+        ),
+        (
+            "not a checkpoint",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            br#"{"name":"y","checkpoint":{"hello":1}}"#.to_vec(),
+            422,
+        ),
+        (
+            "oversize body",
+            "POST",
+            "/api/v1/agents",
+            authed.to_vec(),
+            [br#"{"name":"big","checkpoint":""#.as_slice(), &big, b"\"}"].concat(),
+            413,
+        ),
+        ("no such route", "GET", "/api/v1/nope", vec![], vec![], 404),
+    ];
+    for (what, method, path, headers, body, want) in &cases {
+        let (code, resp) = raw(a, method, path, headers, body);
+        assert_eq!(code, *want, "{what}: {}", String::from_utf8_lossy(&resp));
+        let v: Value = serde_json::from_slice(&resp)
+            .unwrap_or_else(|_| panic!("{what}: not JSON: {}", String::from_utf8_lossy(&resp)));
+        assert!(
+            v["error"]["message"]
+                .as_str()
+                .is_some_and(|m| !m.is_empty()),
+            "{what}: {v}"
+        );
+    }
+    // Nothing was written.
+    let (_, agents) = call(a, "GET", "/api/v1/agents", None, None);
+    assert!(
+        agents["agents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|x| x["builtin"] == true),
+        "{agents}"
+    );
+    let (_, matches) = call(a, "GET", "/api/v1/matches", None, None);
+    assert_eq!(matches["matches"].as_array().unwrap().len(), 0);
+    // And the server is still up.
+    let (code, _) = call(a, "GET", "/api/v1/healthz", None, None);
+    assert_eq!(code, 200);
+}
