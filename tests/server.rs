@@ -407,6 +407,16 @@ fn kill_9_in_the_middle_of_a_match_loses_nothing() {
     );
 }
 
+/// What, method, path, headers, body, expected status.
+type Case<'a> = (
+    &'a str,
+    &'a str,
+    &'a str,
+    Vec<(&'a str, &'a str)>,
+    Vec<u8>,
+    u16,
+);
+
 #[test]
 fn bad_input_gets_a_json_4xx_and_writes_nothing() {
     let dir = tempdir("bad");
@@ -427,7 +437,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
         ("Authorization", auth.as_str()),
     ];
     let big = vec![b'x'; 70_000];
-    let cases: Vec<(&str, &str, &str, Vec<(&str, &str)>, Vec<u8>, u16)> = vec![
+    let cases: Vec<Case> = vec![
         (
             "malformed JSON",
             "POST",
