@@ -27,6 +27,8 @@ CREATE TABLE matches (
     sim_version     TEXT NOT NULL,
     spec_hash_a     TEXT NOT NULL,
     spec_hash_b     TEXT NOT NULL,
+    -- Whether replay frames are stored (continuous-mode matches keep none: they are re-simulated).
+    keep_replay     INTEGER NOT NULL DEFAULT 1,
     -- queued -> running -> done | failed | cancelled; a running match whose process died is re-queued.
     status          TEXT NOT NULL CHECK (status IN ('queued', 'running', 'done', 'failed', 'cancelled')),
     created_at      TEXT NOT NULL DEFAULT CURRENT_TIMESTAMP,

@@ -352,6 +352,31 @@ fn continuous_mode_fills_the_leaderboard() {
                     .all(|r| r["matches"].as_u64().unwrap() > 0),
                 "{board}"
             );
+            // Continuous-mode matches keep no replay, and say how to re-simulate one.
+            let (_, list) = call(
+                &srv.addr,
+                "GET",
+                "/api/v1/matches?status=done&limit=1",
+                None,
+                None,
+            );
+            let id = list["matches"][0]["id"].as_i64().unwrap();
+            let (code, e) = call(
+                &srv.addr,
+                "GET",
+                &format!("/api/v1/matches/{id}/replay"),
+                None,
+                None,
+            );
+            assert_eq!(code, 404);
+            assert_eq!(e["error"]["code"], "no_replay");
+            assert!(
+                e["error"]["message"]
+                    .as_str()
+                    .unwrap()
+                    .contains("rally match scripted"),
+                "{e}"
+            );
             break;
         }
         assert!(

@@ -320,7 +320,7 @@ async fn queue_match(
             .unwrap_or_default();
         (t.as_nanos() as u64) & (i64::MAX as u64)
     });
-    let id = db::queue_match(&s.pool, &a, &b, q.rallies, seed).await?;
+    let id = db::queue_match(&s.pool, &a, &b, q.rallies, seed, true).await?;
     s.wake.notify_one();
     let m = db::match_row(&s.pool, id).await?;
     Ok((
@@ -418,6 +418,24 @@ async fn get_replay(
             StatusCode::CONFLICT,
             "not_done",
             format!("match {id} is {}; replays exist once it is done", m.status),
+        ));
+    }
+    if !m.keep_replay {
+        let names = (
+            db::agent(&s.pool, m.agent_a).await?,
+            db::agent(&s.pool, m.agent_b).await?,
+        );
+        let (na, nb) = (
+            names.0.map(|a| a.name).unwrap_or_default(),
+            names.1.map(|a| a.name).unwrap_or_default(),
+        );
+        return Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            "no_replay",
+            format!(
+                "match {id} was scheduled by the continuous mode and keeps no replay; re-simulate it bit for bit with `rally match {na} {nb} --rallies {} --seed {} --replay replay.json`",
+                m.rallies, m.seed
+            ),
         ));
     }
     if rally >= m.rallies {

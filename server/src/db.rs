@@ -163,6 +163,8 @@ pub struct Match {
     pub spec_hash_a: String,
     /// Hash of B's spec when queued.
     pub spec_hash_b: String,
+    /// Replay frames are stored.
+    pub keep_replay: bool,
     /// queued | running | done | failed | cancelled.
     pub status: String,
     /// When queued.
@@ -189,7 +191,7 @@ pub struct Match {
     pub error: Option<String>,
 }
 
-const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error";
+const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error";
 
 /// Queues a match.
 pub async fn queue_match(
@@ -198,9 +200,10 @@ pub async fn queue_match(
     b: &Agent,
     rallies: u32,
     seed: u64,
+    keep_replay: bool,
 ) -> sqlx::Result<i64> {
     let r = sqlx::query(
-        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, status) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued')",
+        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued')",
     )
     .bind(a.id)
     .bind(b.id)
@@ -210,6 +213,7 @@ pub async fn queue_match(
     .bind(sim::SIM_VERSION)
     .bind(&a.spec_hash)
     .bind(&b.spec_hash)
+    .bind(keep_replay)
     .execute(pool)
     .await?;
     Ok(r.last_insert_rowid())
@@ -309,7 +313,7 @@ pub async fn store_result(
                 .execute(&mut *tx)
                 .await?;
         }
-        if let Some(frames) = replay.get(rally.index as usize) {
+        if let Some(frames) = replay.get(rally.index as usize).filter(|f| !f.is_empty()) {
             sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES (?, ?, ?)")
                 .bind(id)
                 .bind(rally.index as i64)
