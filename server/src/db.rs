@@ -244,31 +244,16 @@ pub async fn matches(
     .await
 }
 
-/// Claims the oldest queued match (queued → running), atomically.
+/// Claims the oldest queued match (queued → running) in one statement, so two workers never take
+/// the same match and no read lock has to be upgraded (which SQLite can refuse under WAL).
 pub async fn claim(pool: &SqlitePool) -> sqlx::Result<Option<Match>> {
-    let mut tx = pool.begin().await?;
-    let id: Option<(i64,)> =
-        sqlx::query_as("SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1")
-            .fetch_optional(&mut *tx)
-            .await?;
-    let Some((id,)) = id else {
-        tx.commit().await?;
-        return Ok(None);
-    };
-    let r = sqlx::query("UPDATE matches SET status = 'running', started_at = CURRENT_TIMESTAMP WHERE id = ? AND status = 'queued'")
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-    if r.rows_affected() == 0 {
-        tx.rollback().await?;
-        return Ok(None);
-    }
-    let m: Match = sqlx::query_as(&format!("SELECT {MATCH_COLUMNS} FROM matches WHERE id = ?"))
-        .bind(id)
-        .fetch_one(&mut *tx)
-        .await?;
-    tx.commit().await?;
-    Ok(Some(m))
+    sqlx::query_as(&format!(
+        "UPDATE matches SET status = 'running', started_at = CURRENT_TIMESTAMP \
+         WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1) AND status = 'queued' \
+         RETURNING {MATCH_COLUMNS}"
+    ))
+    .fetch_optional(pool)
+    .await
 }
 
 /// Stores a played match — rallies, crossings, replay, summary — and marks it done, in one
@@ -279,12 +264,25 @@ pub async fn store_result(
     r: &MatchRecord,
     replay: &agents::matchrun::Replay,
 ) -> sqlx::Result<bool> {
+    // The first statement writes, so the transaction takes the write lock at once (waiting out other
+    // writers) instead of upgrading a read lock later.
     let mut tx = pool.begin().await?;
-    let status: Option<(String,)> = sqlx::query_as("SELECT status FROM matches WHERE id = ?")
-        .bind(id)
-        .fetch_optional(&mut *tx)
-        .await?;
-    if status.map(|s| s.0) != Some("running".into()) {
+    let marked = sqlx::query(
+        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ? AND status = 'running'",
+    )
+    .bind(r.points[0] as i64)
+    .bind(r.points[1] as i64)
+    .bind(r.mean_rally_length)
+    .bind(r.max_rally_length as i64)
+    .bind(r.drift.in_box_fraction)
+    .bind(r.drift.energy_distance)
+    .bind(r.drift.drift_slope)
+    .bind(serde_json::to_string(&r.drift).unwrap_or_default())
+    .bind(id)
+    .execute(&mut *tx)
+    .await?;
+    if marked.rows_affected() == 0 {
+        // Cancelled meanwhile: it stays cancelled and nothing is written.
         tx.rollback().await?;
         return Ok(false);
     }
@@ -322,20 +320,7 @@ pub async fn store_result(
                 .await?;
         }
     }
-    sqlx::query(
-        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ?",
-    )
-    .bind(r.points[0] as i64)
-    .bind(r.points[1] as i64)
-    .bind(r.mean_rally_length)
-    .bind(r.max_rally_length as i64)
-    .bind(r.drift.in_box_fraction)
-    .bind(r.drift.energy_distance)
-    .bind(r.drift.drift_slope)
-    .bind(serde_json::to_string(&r.drift).unwrap_or_default())
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
+
     tx.commit().await?;
     Ok(true)
 }

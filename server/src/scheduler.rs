@@ -95,7 +95,20 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
     .await;
     match result {
         Ok(Ok((record, replay))) => {
-            let stored = db::store_result(&state.pool, id, &record, &replay).await?;
+            // A busy database is retried; a match that still cannot be stored stays `running` and
+            // is re-queued at the next start (nothing half-written: it is one transaction).
+            let mut attempt = 0;
+            let stored = loop {
+                match db::store_result(&state.pool, id, &record, &replay).await {
+                    Ok(stored) => break stored,
+                    Err(e) if attempt < 5 => {
+                        attempt += 1;
+                        tracing::warn!(id, attempt, error = %e, "storing a match failed; retrying");
+                        tokio::time::sleep(Duration::from_millis(200 * attempt)).await;
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+            };
             tracing::info!(
                 id,
                 points_a = record.points[0],
