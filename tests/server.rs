@@ -717,3 +717,41 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
     let (code, _) = call(a, "GET", "/api/v1/healthz", None, None);
     assert_eq!(code, 200);
 }
+
+#[test]
+fn sigterm_shuts_down_gracefully_and_loses_nothing() {
+    let dir = tempdir("sigterm");
+    let mut srv = start(&dir, false);
+    let (code, m) = call(
+        &srv.addr,
+        "POST",
+        "/api/v1/matches",
+        Some(&json!({"a": 1, "b": 2, "rallies": 40, "seed": 5})),
+        None,
+    );
+    assert_eq!(code, 202);
+    let id = m["id"].as_i64().unwrap();
+    wait_for(&srv.addr, id, "running", Duration::from_secs(30));
+    let term = Command::new("kill")
+        .args(["-TERM", &srv.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(term.success());
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = srv.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "no exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success(), "exit status {status:?}");
+    drop(srv);
+    // The running match was finished before exit (or, at worst, is re-queued): never lost.
+    let srv = start(&dir, false);
+    let done = wait_for(&srv.addr, id, "done", Duration::from_secs(120));
+    assert_eq!(done["rally_log"].as_array().unwrap().len(), 40);
+}
