@@ -196,7 +196,52 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     assert_eq!(got["name"], "zero-policy");
     assert!(got["hit_rate"].as_f64().unwrap() >= 0.0);
 
-    // A match between two built-ins reproduces `rally match` bit for bit.
+    // The admin issues a submitter token; it can submit but not issue tokens; only its hash is stored.
+    let (code, t) = call(
+        a,
+        "POST",
+        "/api/v1/tokens",
+        Some(&json!({"name": "lab-1"})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 201, "{t}");
+    let token = t["token"].as_str().unwrap().to_string();
+    let (code, e) = call(
+        a,
+        "POST",
+        "/api/v1/tokens",
+        Some(&json!({"name": "lab-2"})),
+        Some(&token),
+    );
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (403, Some("admin_only"))
+    );
+    let (code, e) = call(
+        a,
+        "POST",
+        "/api/v1/tokens",
+        Some(&json!({"name": "lab-1"})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 409, "{e}");
+    let (code, sub2) = call(
+        a,
+        "POST",
+        "/api/v1/agents",
+        Some(&json!({"name": "lab-1-policy", "checkpoint": template("lab")})),
+        Some(&token),
+    );
+    assert_eq!(code, 201, "{sub2}");
+    let db_bytes = std::fs::read(dir.join("rally.db")).unwrap_or_default();
+    let wal = std::fs::read(dir.join("rally.db-wal")).unwrap_or_default();
+    let needle = token.as_bytes();
+    assert!(
+        !db_bytes.windows(needle.len()).any(|w| w == needle)
+            && !wal.windows(needle.len()).any(|w| w == needle),
+        "the token itself is never stored"
+    );
+
     let (code, m) = call(
         a,
         "POST",
@@ -280,7 +325,7 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     assert_eq!(code, 200);
     assert_eq!(board["matches"], 2);
     let rows = board["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), builtins + 1);
+    assert_eq!(rows.len(), builtins + 2);
     for r in rows {
         let played = r["matches"].as_u64().unwrap();
         assert_eq!(played > 0, r["rating_low"].is_number(), "{r}");
@@ -688,6 +733,22 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             413,
         ),
         ("no such route", "GET", "/api/v1/nope", vec![], vec![], 404),
+        (
+            "token without admin",
+            "POST",
+            "/api/v1/tokens",
+            json_ct.to_vec(),
+            br#"{"name":"t"}"#.to_vec(),
+            401,
+        ),
+        (
+            "token with a bad name",
+            "POST",
+            "/api/v1/tokens",
+            authed.to_vec(),
+            br#"{"name":"a b"}"#.to_vec(),
+            400,
+        ),
     ];
     for (what, method, path, headers, body, want) in &cases {
         let (code, resp) = raw(a, method, path, headers, body);

@@ -111,6 +111,7 @@ pub fn router(state: AppState) -> Router {
         .route("/matches/{id}", get(get_match).delete(cancel_match))
         .route("/matches/{id}/replay", get(get_replay))
         .route("/leaderboard", get(leaderboard))
+        .route("/tokens", axum::routing::post(issue_token))
         .route("/metrics", get(metrics))
         .route("/openapi.json", get(openapi))
         .fallback(|| async {
@@ -164,36 +165,94 @@ pub fn check_name(name: &str) -> Result<(), String> {
     Ok(())
 }
 
-fn check_token(s: &AppState, headers: &HeaderMap) -> ApiResult<()> {
-    let expected = &s.settings.admin_token;
-    if expected.is_empty() {
-        return Err(ApiError::new(
-            StatusCode::FORBIDDEN,
-            "submissions_disabled",
-            "this server has no admin token set (config admin_token or RALLY_ADMIN_TOKEN)",
-        ));
-    }
+/// Who made a request.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Caller {
+    /// The admin token.
+    Admin,
+    /// A submitter token (its id).
+    Submitter(i64),
+}
+
+/// Checks the bearer token: the admin token (compared in constant time) or a stored submitter token
+/// (compared by its SHA-256).
+async fn check_token(s: &AppState, headers: &HeaderMap) -> ApiResult<Caller> {
     let given = headers
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    // Compare in constant time over the expected length.
-    let ok = given.is_some_and(|g| {
-        g.len() == expected.len()
-            && g.bytes()
-                .zip(expected.bytes())
-                .fold(0u8, |acc, (x, y)| acc | (x ^ y))
-                == 0
-    });
-    if ok {
-        Ok(())
-    } else {
-        Err(ApiError::new(
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .ok_or_else(|| {
+            ApiError::new(
+                StatusCode::UNAUTHORIZED,
+                "unauthorized",
+                "missing bearer token (Authorization: Bearer TOKEN)",
+            )
+        })?;
+    let admin = &s.settings.admin_token;
+    let is_admin = !admin.is_empty()
+        && given.len() == admin.len()
+        && given
+            .bytes()
+            .zip(admin.bytes())
+            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
+            == 0;
+    if is_admin {
+        return Ok(Caller::Admin);
+    }
+    match db::token_id(&s.pool, given).await? {
+        Some(id) => Ok(Caller::Submitter(id)),
+        None => Err(ApiError::new(
             StatusCode::UNAUTHORIZED,
             "unauthorized",
-            "missing or wrong bearer token",
-        ))
+            "unknown bearer token",
+        )),
     }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NewToken {
+    name: String,
+}
+
+async fn issue_token(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    body: Result<Json<NewToken>, JsonRejection>,
+) -> ApiResult<Response> {
+    if check_token(&s, &headers).await? != Caller::Admin {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            "admin_only",
+            "only the admin token can issue tokens",
+        ));
+    }
+    let Json(body) = body?;
+    check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;
+    let mut raw = [0u8; 32];
+    getrandom::getrandom(&mut raw).map_err(|e| anyhow::anyhow!("no randomness: {e}"))?;
+    let token: String = std::iter::once("rt_".to_string())
+        .chain(raw.iter().map(|b| format!("{b:02x}")))
+        .collect();
+    let id = match db::insert_token(&s.pool, &body.name, &token).await {
+        Ok(id) => id,
+        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => {
+            return Err(ApiError {
+                field: Some("name"),
+                ..ApiError::new(
+                    StatusCode::CONFLICT,
+                    "name_taken",
+                    format!("a token named '{}' exists", body.name),
+                )
+            })
+        }
+        Err(e) => return Err(e.into()),
+    };
+    Ok((
+        StatusCode::CREATED,
+        Json(json!({"id": id, "name": body.name, "token": token, "note": "shown once: only its SHA-256 is stored"})),
+    )
+        .into_response())
 }
 
 #[derive(Deserialize)]
@@ -208,7 +267,7 @@ async fn submit_agent(
     headers: HeaderMap,
     body: Result<Json<SubmitAgent>, JsonRejection>,
 ) -> ApiResult<Response> {
-    check_token(&s, &headers)?;
+    let caller = check_token(&s, &headers).await?;
     let Json(body) = body?;
     check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;
     if db::agents(&s.pool)
@@ -257,7 +316,18 @@ async fn submit_agent(
         report.success_rate.value,
         report.effort.value,
     );
-    let id = match db::insert_checkpoint_agent(&s.pool, &body.name, &text, qual).await {
+    let id = match db::insert_checkpoint_agent(
+        &s.pool,
+        &body.name,
+        &text,
+        qual,
+        match caller {
+            Caller::Admin => None,
+            Caller::Submitter(id) => Some(id),
+        },
+    )
+    .await
+    {
         Ok(id) => id,
         Err(sqlx::Error::Database(e)) if e.is_unique_violation() => {
             return Err(ApiError {

@@ -22,6 +22,7 @@ mod tests {
             "/matches/{id}/replay",
             "/leaderboard",
             "/metrics",
+            "/tokens",
         ] {
             assert!(paths.contains_key(p), "{p} is not documented");
         }
