@@ -2,7 +2,8 @@
 //! weak prior — every agent is credited one point won and one lost against a virtual anchor of
 //! strength 1 — and reported on the Elo scale, `1500 + 400·log10 γ`, so the anchor sits at 1500.
 //! 95% intervals come from a seeded bootstrap over matches (deterministic: the same matches give the
-//! same leaderboard).
+//! same leaderboard). Glicko-2 (the `skillratings` crate, default configuration) is an online view
+//! beside it: matches in the order they were queued, each one game won by the side with more points.
 
 use serde::Serialize;
 
@@ -78,6 +79,10 @@ pub struct Row {
     pub in_box_fraction: Option<f64>,
     /// Serve → return energy distance of its matches (mean over matches that have one).
     pub drift: Option<f64>,
+    /// Glicko-2 rating (online, one game per match).
+    pub glicko2: f64,
+    /// Its rating deviation.
+    pub glicko2_deviation: f64,
     /// Qualification hit rate (checkpoints).
     pub hit_rate: Option<f64>,
     /// Qualification success rate.
@@ -139,6 +144,7 @@ pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome]) -> Leaderboard {
             }
         }
     }
+    let glicko = glicko2(n, &pairs);
     let mut rows: Vec<Row> = agents
         .iter()
         .enumerate()
@@ -178,6 +184,8 @@ pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome]) -> Leaderboard {
                 max_rally_length: mine.iter().map(|o| o.5).max(),
                 in_box_fraction: mean(mine.iter().filter_map(|o| o.6).collect()),
                 drift: mean(mine.iter().filter_map(|o| o.7).collect()),
+                glicko2: glicko[i].rating,
+                glicko2_deviation: glicko[i].deviation,
                 hit_rate: a.hit_rate,
                 success_rate: a.success_rate,
             }
@@ -195,6 +203,33 @@ pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome]) -> Leaderboard {
         matches: outcomes.len(),
         rows,
     }
+}
+
+/// Glicko-2 ratings of `n` agents after the matches `(a, b, points a, points b)` in order.
+fn glicko2(
+    n: usize,
+    pairs: &[(usize, usize, f64, f64)],
+) -> Vec<skillratings::glicko2::Glicko2Rating> {
+    use skillratings::glicko2::{glicko2 as update, Glicko2Config, Glicko2Rating};
+    use skillratings::Outcomes;
+    let config = Glicko2Config::new();
+    let mut r = vec![Glicko2Rating::new(); n];
+    for &(a, b, pa, pb) in pairs {
+        if a == b {
+            continue;
+        }
+        let outcome = if pa > pb {
+            Outcomes::WIN
+        } else if pa < pb {
+            Outcomes::LOSS
+        } else {
+            Outcomes::DRAW
+        };
+        let (x, y) = update(&r[a], &r[b], &outcome, &config);
+        r[a] = x;
+        r[b] = y;
+    }
+    r
 }
 
 #[cfg(test)]
@@ -220,5 +255,17 @@ mod tests {
     fn no_games_means_the_anchor_rating() {
         let r = bradley_terry(&[vec![0.0, 0.0], vec![0.0, 0.0]]);
         assert!(r.iter().all(|x| (x - 1500.0).abs() < 1e-9));
+    }
+
+    #[test]
+    fn glicko2_moves_the_winner_up_and_shrinks_deviations() {
+        let g = glicko2(3, &[(0, 1, 12.0, 8.0), (1, 0, 9.0, 11.0)]);
+        assert!(g[0].rating > 1500.0 && g[1].rating < 1500.0);
+        assert!(g[0].deviation < 350.0 && g[1].deviation < 350.0);
+        assert_eq!(
+            (g[2].rating, g[2].deviation),
+            (1500.0, 350.0),
+            "an agent that never played is untouched"
+        );
     }
 }
