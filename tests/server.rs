@@ -328,7 +328,11 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     assert_eq!(rows.len(), builtins + 2);
     for r in rows {
         let played = r["matches"].as_u64().unwrap();
-        assert_eq!(played > 0, r["glicko2_deviation"].as_f64().unwrap() < 350.0, "{r}");
+        assert_eq!(
+            played > 0,
+            r["glicko2_deviation"].as_f64().unwrap() < 350.0,
+            "{r}"
+        );
         assert_eq!(played > 0, r["rating_low"].is_number(), "{r}");
         if played > 0 {
             assert!(
