@@ -41,6 +41,17 @@ impl ApiError {
         }
     }
 
+    fn name_taken(what: &str, name: &str) -> ApiError {
+        ApiError {
+            field: Some("name"),
+            ..ApiError::new(
+                StatusCode::CONFLICT,
+                "name_taken",
+                format!("{what} named '{name}' exists"),
+            )
+        }
+    }
+
     fn not_found(what: &str, id: i64) -> ApiError {
         ApiError::new(
             StatusCode::NOT_FOUND,
@@ -237,14 +248,7 @@ async fn issue_token(
     let id = match db::insert_token(&s.pool, &body.name, &token).await {
         Ok(id) => id,
         Err(sqlx::Error::Database(e)) if e.is_unique_violation() => {
-            return Err(ApiError {
-                field: Some("name"),
-                ..ApiError::new(
-                    StatusCode::CONFLICT,
-                    "name_taken",
-                    format!("a token named '{}' exists", body.name),
-                )
-            })
+            return Err(ApiError::name_taken("a token", &body.name))
         }
         Err(e) => return Err(e.into()),
     };
@@ -275,14 +279,7 @@ async fn submit_agent(
         .iter()
         .any(|a| a.name == body.name)
     {
-        return Err(ApiError {
-            field: Some("name"),
-            ..ApiError::new(
-                StatusCode::CONFLICT,
-                "name_taken",
-                format!("an agent named '{}' exists", body.name),
-            )
-        });
+        return Err(ApiError::name_taken("an agent", &body.name));
     }
     let text = body.checkpoint.to_string();
     let checkpoint =
@@ -330,14 +327,7 @@ async fn submit_agent(
     {
         Ok(id) => id,
         Err(sqlx::Error::Database(e)) if e.is_unique_violation() => {
-            return Err(ApiError {
-                field: Some("name"),
-                ..ApiError::new(
-                    StatusCode::CONFLICT,
-                    "name_taken",
-                    format!("an agent named '{}' exists", body.name),
-                )
-            })
+            return Err(ApiError::name_taken("an agent", &body.name))
         }
         Err(e) => return Err(e.into()),
     };

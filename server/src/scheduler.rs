@@ -18,7 +18,7 @@ use agents::player::PlayerSpec;
 use tokio::sync::{Mutex, Notify};
 use tokio::task::JoinHandle;
 
-use crate::{db, ratings, AppState};
+use crate::{db, AppState};
 
 /// Builds the player recipe of a stored agent.
 pub fn player_spec(state: &AppState, kind: &str, spec: &str) -> Result<PlayerSpec, String> {
@@ -142,7 +142,10 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
         return Ok(false);
     }
     let outcomes = db::outcomes(&state.pool).await?;
-    let board = ratings::leaderboard(&agents, &outcomes);
+    // The leaderboard the API serves (cached; recomputed off the async threads when it changed).
+    let board = crate::api::current_board(state)
+        .await
+        .map_err(|e| anyhow::anyhow!("computing the leaderboard: {e:?}"))?;
     let width = |id: i64| {
         board
             .rows
