@@ -20,7 +20,7 @@ ID=$(jq -r '.agent.id' "/tmp/$NAME.reply.json")
 echo
 
 echo "== queue $NAME (id $ID) against the built-in 'scripted' (id 1), 10 rallies, seed 7"
-MATCH=$(curl -sf -H 'Content-Type: application/json' -d "{\"a\": $ID, \"b\": 1, \"rallies\": 10, \"seed\": 7}" "$S/matches" | jq -r .id)
+MATCH=$(curl -sf -H "Authorization: Bearer $RALLY_ADMIN_TOKEN" -H 'Content-Type: application/json' -d "{\"a\": $ID, \"b\": 1, \"rallies\": 10, \"seed\": 7}" "$S/matches" | jq -r .id)
 until [ "$(curl -sf "$S/matches/$MATCH" | jq -r .status)" = done ]; do sleep 0.5; done
 curl -sf "$S/matches/$MATCH" | jq '{points: [.points_a, .points_b], mean_rally_length, rallies: [.rally_log[] | {idx, server, length, end_reason, failing_side}]}'
 

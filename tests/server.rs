@@ -32,6 +32,11 @@ fn tempdir(tag: &str) -> PathBuf {
 }
 
 fn start(dir: &Path, continuous: bool) -> Server {
+    start_with(dir, continuous, "")
+}
+
+/// Starts `rally serve` with `extra` lines appended to the test configuration.
+fn start_with(dir: &Path, continuous: bool, extra: &str) -> Server {
     // Continuous mode runs two workers: concurrent claims and stores on one SQLite file.
     let workers = if continuous { 2 } else { 1 };
     let config = dir.join("server.toml");
@@ -39,7 +44,7 @@ fn start(dir: &Path, continuous: bool) -> Server {
         &config,
         format!(
             "addr = \"127.0.0.1:0\"\ndb = \"{}\"\nworkers = {workers}\ncontinuous = {continuous}\ncontinuous_rallies = 4\n\
-             continuous_pause_s = 0.0\nmax_rallies = 1000\nqualification_episodes = 6\nmax_body_bytes = 65536\nadmin_token = \"\"\n",
+             continuous_pause_s = 0.0\nmax_rallies = 1000\nqualification_episodes = 6\nmax_body_bytes = 65536\nadmin_token = \"\"\n{extra}",
             dir.join("rally.db").display()
         ),
     )
@@ -73,6 +78,18 @@ fn raw(
     headers: &[(&str, &str)],
     body: &[u8],
 ) -> (u16, Vec<u8>) {
+    let (status, _, body) = raw_full(addr, method, path, headers, body);
+    (status, body)
+}
+
+/// [`raw`] with the response's header block too.
+fn raw_full(
+    addr: &str,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> (u16, String, Vec<u8>) {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
     let mut req = format!(
@@ -112,7 +129,7 @@ fn raw(
         }
         body = out;
     }
-    (status, body)
+    (status, head, body)
 }
 
 fn call(
@@ -247,7 +264,7 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         "POST",
         "/api/v1/matches",
         Some(&json!({"a": 1, "b": 2, "rallies": 6, "seed": 7})),
-        None,
+        Some(TOKEN),
     );
     assert_eq!(code, 202, "{m}");
     let id = m["id"].as_i64().unwrap();
@@ -313,7 +330,7 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         "POST",
         "/api/v1/matches",
         Some(&json!({"a": cid, "b": 3, "rallies": 4, "seed": 1})),
-        None,
+        Some(TOKEN),
     );
     wait_for(
         a,
@@ -353,7 +370,13 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     assert_eq!(list["matches"].as_array().unwrap().len(), 1);
 
     // Cancelling: a finished match cannot be; a queued or running one can, and stays cancelled.
-    let (code, e) = call(a, "DELETE", &format!("/api/v1/matches/{id}"), None, None);
+    let (code, e) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/matches/{id}"),
+        None,
+        Some(TOKEN),
+    );
     assert_eq!(
         (code, e["error"]["code"].as_str()),
         (409, Some("not_cancellable"))
@@ -363,10 +386,16 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         "POST",
         "/api/v1/matches",
         Some(&json!({"a": 1, "b": 3, "rallies": 300, "seed": 3})),
-        None,
+        Some(TOKEN),
     );
     let lid = long["id"].as_i64().unwrap();
-    let (code, c) = call(a, "DELETE", &format!("/api/v1/matches/{lid}"), None, None);
+    let (code, c) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/matches/{lid}"),
+        None,
+        Some(TOKEN),
+    );
     assert_eq!(
         (code, c["status"].as_str()),
         (200, Some("cancelled")),
@@ -448,7 +477,7 @@ fn kill_9_in_the_middle_of_a_match_loses_nothing() {
         "POST",
         "/api/v1/matches",
         Some(&json!({"a": 2, "b": 3, "rallies": 150, "seed": 11})),
-        None,
+        Some(TOKEN),
     );
     assert_eq!(code, 202);
     let id = m["id"].as_i64().unwrap();
@@ -519,7 +548,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "malformed JSON",
             "POST",
             "/api/v1/matches",
-            json_ct.to_vec(),
+            authed.to_vec(),
             b"{\"a\": 1,".to_vec(),
             400,
         ),
@@ -527,7 +556,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "wrong content type",
             "POST",
             "/api/v1/matches",
-            vec![("Content-Type", "text/plain")],
+            vec![("Content-Type", "text/plain"), ("Authorization", auth.as_str())],
             br#"{"a":1,"b":2,"rallies":3}"#.to_vec(),
             415,
         ),
@@ -535,7 +564,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "missing field",
             "POST",
             "/api/v1/matches",
-            json_ct.to_vec(),
+            authed.to_vec(),
             br#"{"a":1,"b":2}"#.to_vec(),
             422,
         ),
@@ -543,7 +572,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "unknown agent",
             "POST",
             "/api/v1/matches",
-            json_ct.to_vec(),
+            authed.to_vec(),
             br#"{"a":1,"b":999,"rallies":3}"#.to_vec(),
             404,
         ),
@@ -551,7 +580,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "zero rallies",
             "POST",
             "/api/v1/matches",
-            json_ct.to_vec(),
+            authed.to_vec(),
             br#"{"a":1,"b":2,"rallies":0}"#.to_vec(),
             400,
         ),
@@ -559,7 +588,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "too many rallies",
             "POST",
             "/api/v1/matches",
-            json_ct.to_vec(),
+            authed.to_vec(),
             br#"{"a":1,"b":2,"rallies":1001}"#.to_vec(),
             400,
         ),
@@ -567,7 +596,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "negative seed",
             "POST",
             "/api/v1/matches",
-            json_ct.to_vec(),
+            authed.to_vec(),
             br#"{"a":1,"b":2,"rallies":3,"seed":-1}"#.to_vec(),
             422,
         ),
@@ -615,7 +644,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "cancel unknown",
             "DELETE",
             "/api/v1/matches/999",
-            vec![],
+            authed.to_vec(),
             vec![],
             404,
         ),
@@ -737,6 +766,166 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             [br#"{"name":"big","checkpoint":""#.as_slice(), &big, b"\"}"].concat(),
             413,
         ),
+        (
+            "match without a token",
+            "POST",
+            "/api/v1/matches",
+            json_ct.to_vec(),
+            br#"{"a":1,"b":2,"rallies":3}"#.to_vec(),
+            401,
+        ),
+        (
+            "cancel without a token",
+            "DELETE",
+            "/api/v1/matches/1",
+            vec![],
+            vec![],
+            401,
+        ),
+        (
+            "tournament of an unknown kind",
+            "POST",
+            "/api/v1/tournaments",
+            authed.to_vec(),
+            br#"{"kind":"swiss","agents":[1,2],"rallies_per_match":2}"#.to_vec(),
+            400,
+        ),
+        (
+            "tournament of one agent",
+            "POST",
+            "/api/v1/tournaments",
+            authed.to_vec(),
+            br#"{"kind":"round_robin","agents":[1],"rallies_per_match":2}"#.to_vec(),
+            400,
+        ),
+        (
+            "tournament listing an agent twice",
+            "POST",
+            "/api/v1/tournaments",
+            authed.to_vec(),
+            br#"{"kind":"round_robin","agents":[1,2,1],"rallies_per_match":2}"#.to_vec(),
+            400,
+        ),
+        (
+            "tournament with an unknown agent",
+            "POST",
+            "/api/v1/tournaments",
+            authed.to_vec(),
+            br#"{"kind":"gauntlet","agents":[1,999],"rallies_per_match":2}"#.to_vec(),
+            404,
+        ),
+        (
+            "tournament of 0 rounds",
+            "POST",
+            "/api/v1/tournaments",
+            authed.to_vec(),
+            br#"{"kind":"gauntlet","agents":[1,2],"rallies_per_match":2,"rounds":0}"#.to_vec(),
+            400,
+        ),
+        (
+            "tournament over the match limit",
+            "POST",
+            "/api/v1/tournaments",
+            authed.to_vec(),
+            json!({"kind": "round_robin", "agents": (1..=64).collect::<Vec<i64>>(), "rallies_per_match": 2, "rounds": 100})
+                .to_string()
+                .into_bytes(),
+            400,
+        ),
+        (
+            "tournament without a token",
+            "POST",
+            "/api/v1/tournaments",
+            json_ct.to_vec(),
+            br#"{"kind":"gauntlet","agents":[1,2],"rallies_per_match":2}"#.to_vec(),
+            401,
+        ),
+        (
+            "unknown tournament",
+            "GET",
+            "/api/v1/tournaments/999",
+            vec![],
+            vec![],
+            404,
+        ),
+        (
+            "cancel unknown tournament",
+            "DELETE",
+            "/api/v1/tournaments/999",
+            authed.to_vec(),
+            vec![],
+            404,
+        ),
+        (
+            "SPRT of an agent against itself",
+            "POST",
+            "/api/v1/sprt",
+            authed.to_vec(),
+            br#"{"a":1,"b":1}"#.to_vec(),
+            400,
+        ),
+        (
+            "SPRT with elo0 above elo1",
+            "POST",
+            "/api/v1/sprt",
+            authed.to_vec(),
+            br#"{"a":1,"b":2,"elo0":10,"elo1":5}"#.to_vec(),
+            400,
+        ),
+        (
+            "SPRT with alpha 0.7",
+            "POST",
+            "/api/v1/sprt",
+            authed.to_vec(),
+            br#"{"a":1,"b":2,"alpha":0.7}"#.to_vec(),
+            400,
+        ),
+        (
+            "SPRT with an unknown agent",
+            "POST",
+            "/api/v1/sprt",
+            authed.to_vec(),
+            br#"{"a":1,"b":77}"#.to_vec(),
+            404,
+        ),
+        (
+            "non-numeric SPRT id",
+            "GET",
+            "/api/v1/sprt/abc",
+            vec![],
+            vec![],
+            400,
+        ),
+        (
+            "rating history of an unknown agent",
+            "GET",
+            "/api/v1/agents/999/ratings",
+            vec![],
+            vec![],
+            404,
+        ),
+        (
+            "multipart without a checkpoint",
+            "POST",
+            "/api/v1/agents",
+            vec![
+                ("Content-Type", "multipart/form-data; boundary=XyZ"),
+                ("Authorization", auth.as_str()),
+            ],
+            b"--XyZ\r\nContent-Disposition: form-data; name=\"name\"\r\n\r\nmp\r\n--XyZ--\r\n".to_vec(),
+            422,
+        ),
+        (
+            "multipart with a non-JSON checkpoint",
+            "POST",
+            "/api/v1/agents",
+            vec![
+                ("Content-Type", "multipart/form-data; boundary=XyZ"),
+                ("Authorization", auth.as_str()),
+            ],
+            b"--XyZ\r\nContent-Disposition: form-data; name=\"name\"\r\n\r\nmp\r\n--XyZ\r\nContent-Disposition: form-data; name=\"checkpoint\"; filename=\"c.json\"\r\n\r\nnot json\r\n--XyZ--\r\n".to_vec(),
+            422,
+        ),
         ("no such route", "GET", "/api/v1/nope", vec![], vec![], 404),
         (
             "token without admin",
@@ -779,6 +968,10 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
     );
     let (_, matches) = call(a, "GET", "/api/v1/matches", None, None);
     assert_eq!(matches["matches"].as_array().unwrap().len(), 0);
+    let (_, t) = call(a, "GET", "/api/v1/tournaments", None, None);
+    assert_eq!(t["tournaments"].as_array().unwrap().len(), 0, "{t}");
+    let (_, p) = call(a, "GET", "/api/v1/sprt", None, None);
+    assert_eq!(p["sprts"].as_array().unwrap().len(), 0, "{p}");
     // And the server is still up.
     let (code, _) = call(a, "GET", "/api/v1/healthz", None, None);
     assert_eq!(code, 200);
@@ -793,7 +986,7 @@ fn sigterm_shuts_down_gracefully_and_loses_nothing() {
         "POST",
         "/api/v1/matches",
         Some(&json!({"a": 1, "b": 2, "rallies": 40, "seed": 5})),
-        None,
+        Some(TOKEN),
     );
     assert_eq!(code, 202);
     let id = m["id"].as_i64().unwrap();
@@ -820,4 +1013,356 @@ fn sigterm_shuts_down_gracefully_and_loses_nothing() {
     let srv = start(&dir, false);
     let done = wait_for(&srv.addr, id, "done", Duration::from_secs(120));
     assert_eq!(done["rally_log"].as_array().unwrap().len(), 40);
+}
+
+/// Polls `path` until `done(value)` holds.
+fn poll(addr: &str, path: &str, limit: Duration, done: impl Fn(&Value) -> bool) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let (code, v) = call(addr, "GET", path, None, None);
+        assert_eq!(code, 200, "{path}: {v}");
+        if done(&v) {
+            return v;
+        }
+        assert!(t0.elapsed() < limit, "{path} did not get there: {v}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A multipart/form-data body with text fields and one file field.
+fn multipart(boundary: &str, fields: &[(&str, &str)], file: (&str, &str, &[u8])) -> Vec<u8> {
+    let mut out = Vec::new();
+    for (k, v) in fields {
+        out.extend_from_slice(
+            format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{k}\"\r\n\r\n{v}\r\n")
+                .as_bytes(),
+        );
+    }
+    out.extend_from_slice(
+        format!(
+            "--{boundary}\r\nContent-Disposition: form-data; name=\"{}\"; filename=\"{}\"\r\nContent-Type: application/json\r\n\r\n",
+            file.0, file.1
+        )
+        .as_bytes(),
+    );
+    out.extend_from_slice(file.2);
+    out.extend_from_slice(format!("\r\n--{boundary}--\r\n").as_bytes());
+    out
+}
+
+#[test]
+fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
+    let dir = tempdir("contests");
+    let srv = start_with(&dir, false, "max_matches_per_minute = 8\n");
+    let a = srv.addr.as_str();
+    let (code, t) = call(
+        a,
+        "POST",
+        "/api/v1/tokens",
+        Some(&json!({"name": "lab"})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 201, "{t}");
+    let token = t["token"].as_str().unwrap().to_string();
+    let bearer = format!("Bearer {token}");
+
+    // A checkpoint uploaded as a multipart form by the submitter token.
+    let body = multipart(
+        "b0undary",
+        &[("name", "uploaded")],
+        (
+            "checkpoint",
+            "uploaded.json",
+            template("up").to_string().as_bytes(),
+        ),
+    );
+    let (code, resp) = raw(
+        a,
+        "POST",
+        "/api/v1/agents",
+        &[
+            ("Content-Type", "multipart/form-data; boundary=b0undary"),
+            ("Authorization", bearer.as_str()),
+        ],
+        &body,
+    );
+    let v: Value = serde_json::from_slice(&resp).unwrap();
+    assert_eq!(code, 201, "{v}");
+    assert_eq!(v["agent"]["name"], "uploaded");
+    assert_eq!(v["qualification"]["episodes"], 6);
+
+    // A round robin of the three built-ins, two rounds: 6 matches, charged to the token (6 of 8).
+    let (code, t) = call(
+        a,
+        "POST",
+        "/api/v1/tournaments",
+        Some(
+            &json!({"kind": "round_robin", "agents": [1, 2, 3], "rallies_per_match": 3, "rounds": 2, "seed": 40}),
+        ),
+        Some(&token),
+    );
+    assert_eq!(code, 202, "{t}");
+    let tid = t["id"].as_i64().unwrap();
+    assert_eq!(t["progress"]["total"], 6);
+    let seeds: Vec<i64> = t["matches"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["seed"].as_i64().unwrap())
+        .collect();
+    assert_eq!(seeds, (40..46).collect::<Vec<i64>>());
+
+    // The rate limit: two more matches fit in the minute, the third is refused with Retry-After and
+    // writes nothing; the admin is not limited.
+    let q = json!({"a": 1, "b": 2, "rallies": 1, "seed": 1});
+    for _ in 0..2 {
+        let (code, m) = call(a, "POST", "/api/v1/matches", Some(&q), Some(&token));
+        assert_eq!(code, 202, "{m}");
+    }
+    let (code, head, resp) = raw_full(
+        a,
+        "POST",
+        "/api/v1/matches",
+        &[
+            ("Content-Type", "application/json"),
+            ("Authorization", bearer.as_str()),
+        ],
+        q.to_string().as_bytes(),
+    );
+    let e: Value = serde_json::from_slice(&resp).unwrap();
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (429, Some("rate_limited")),
+        "{e}"
+    );
+    let retry: u64 = head
+        .lines()
+        .find_map(|l| {
+            l.to_ascii_lowercase()
+                .strip_prefix("retry-after:")
+                .map(|x| x.trim().to_string())
+        })
+        .expect("a Retry-After header")
+        .parse()
+        .unwrap();
+    assert!((1..=61).contains(&retry), "{retry}");
+    let (code, _) = call(
+        a,
+        "POST",
+        "/api/v1/tournaments",
+        Some(&json!({"kind": "gauntlet", "agents": [1, 2], "rallies_per_match": 1})),
+        Some(&token),
+    );
+    assert_eq!(code, 429);
+    let (code, m) = call(a, "POST", "/api/v1/matches", Some(&q), Some(TOKEN));
+    assert_eq!(code, 202, "{m}");
+    let (_, all) = call(a, "GET", "/api/v1/matches", None, None);
+    assert_eq!(
+        all["matches"].as_array().unwrap().len(),
+        9,
+        "6 + 2 + 1 (admin), none refused"
+    );
+    let (_, ts) = call(a, "GET", "/api/v1/tournaments", None, None);
+    assert_eq!(ts["tournaments"].as_array().unwrap().len(), 1);
+
+    // The tournament finishes; its cross-table and standings agree with its matches.
+    let t = poll(
+        a,
+        &format!("/api/v1/tournaments/{tid}"),
+        Duration::from_secs(240),
+        |v| v["progress"]["state"] == "finished",
+    );
+    assert_eq!(t["progress"]["done"], 6, "{t}");
+    assert_eq!(t["progress"]["fraction"], 1.0);
+    let ids = [1i64, 2, 3];
+    let table = &t["cross_table"];
+    let mut points = [[0i64; 3]; 3];
+    for m in t["matches"].as_array().unwrap() {
+        let i = ids
+            .iter()
+            .position(|&x| x == m["agent_a"].as_i64().unwrap())
+            .unwrap();
+        let j = ids
+            .iter()
+            .position(|&x| x == m["agent_b"].as_i64().unwrap())
+            .unwrap();
+        points[i][j] += m["points_a"].as_i64().unwrap();
+        points[j][i] += m["points_b"].as_i64().unwrap();
+    }
+    for i in 0..3 {
+        assert!(table[i][i].is_null());
+        for j in 0..3 {
+            if i != j {
+                assert_eq!(table[i][j]["matches"], 2, "{table}");
+                assert_eq!(table[i][j]["points_for"], points[i][j]);
+                assert_eq!(table[i][j]["points_against"], points[j][i]);
+            }
+        }
+    }
+    let standings = t["standings"].as_array().unwrap();
+    let total_for: i64 = standings
+        .iter()
+        .map(|s| s["points_for"].as_i64().unwrap())
+        .sum();
+    assert_eq!(total_for, points.iter().flatten().sum::<i64>());
+    assert!(standings.iter().all(|s| s["matches"] == 4));
+
+    // Each finished match stores both sides' drift; each one between two agents moves both ratings.
+    let first = t["matches"][0]["id"].as_i64().unwrap();
+    let (_, m) = call(a, "GET", &format!("/api/v1/matches/{first}"), None, None);
+    let sides = m["drift_by_side"].as_array().unwrap();
+    assert_eq!(sides.len(), 2, "{m}");
+    assert_eq!(
+        (sides[0]["side"].as_str(), sides[0]["agent_id"].as_i64()),
+        (Some("A"), m["agent_a"].as_i64())
+    );
+    assert!(sides[1]["drift"]["crossings"].as_u64().is_some());
+    poll(
+        a,
+        "/api/v1/matches?status=queued",
+        Duration::from_secs(120),
+        |v| v["matches"].as_array().unwrap().is_empty(),
+    );
+    poll(
+        a,
+        "/api/v1/matches?status=running",
+        Duration::from_secs(120),
+        |v| v["matches"].as_array().unwrap().is_empty(),
+    );
+    let (_, done) = call(a, "GET", "/api/v1/matches?agent=1&status=done", None, None);
+    let (_, h) = call(a, "GET", "/api/v1/agents/1/ratings", None, None);
+    let history = h["history"].as_array().unwrap();
+    assert_eq!(
+        history.len(),
+        done["matches"].as_array().unwrap().len(),
+        "{h}"
+    );
+    assert!(history
+        .windows(2)
+        .all(|w| w[0]["seq"].as_i64() < w[1]["seq"].as_i64()));
+    assert!(history
+        .windows(2)
+        .all(|w| w[1]["deviation"].as_f64() <= w[0]["deviation"].as_f64()));
+    let (_, board) = call(a, "GET", "/api/v1/leaderboard", None, None);
+    let row = board["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["agent_id"] == 1)
+        .unwrap()
+        .clone();
+    assert_eq!(row["glicko2"], history.last().unwrap()["rating"], "{row}");
+    assert!(
+        row["drift"].as_f64().is_some() || row["in_box_fraction"].as_f64().is_some(),
+        "{row}"
+    );
+
+    // An SPRT plays one match at a time, sides swapped and seed + k, until the test decides.
+    let (code, p) = call(
+        a,
+        "POST",
+        "/api/v1/sprt",
+        Some(
+            &json!({"a": 1, "b": 3, "elo0": 0, "elo1": 100, "rallies_per_match": 4, "max_matches": 6, "seed": 3}),
+        ),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 202, "{p}");
+    let pid = p["id"].as_i64().unwrap();
+    let p = poll(
+        a,
+        &format!("/api/v1/sprt/{pid}"),
+        Duration::from_secs(240),
+        |v| v["status"] != "running",
+    );
+    let status = p["status"].as_str().unwrap();
+    let matches = p["matches"].as_array().unwrap();
+    assert_eq!(
+        matches.len() as i64,
+        p["matches_done"].as_i64().unwrap(),
+        "{p}"
+    );
+    assert!(matches.len() <= 6);
+    let mut shares = vec![];
+    for (k, m) in matches.iter().enumerate() {
+        assert_eq!(m["status"], "done");
+        assert_eq!(m["seed"].as_i64().unwrap(), 3 + k as i64);
+        assert_eq!(
+            m["agent_a"].as_i64().unwrap(),
+            if k % 2 == 0 { 1 } else { 3 }
+        );
+        let (pa, pb) = (
+            m["points_a"].as_i64().unwrap(),
+            m["points_b"].as_i64().unwrap(),
+        );
+        let mine = if k % 2 == 0 { pa } else { pb };
+        if pa + pb > 0 {
+            shares.push(mine as f64 / (pa + pb) as f64);
+        }
+    }
+    // The GSPRT recomputed here from the matches' points.
+    let n = shares.len() as f64;
+    let llr = if shares.len() < 2 {
+        0.0
+    } else {
+        let s0 = 0.5;
+        let s1 = 1.0 / (1.0 + 10f64.powf(-100.0 / 400.0));
+        let mean = shares.iter().sum::<f64>() / n;
+        let var = shares.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let mid = 0.5 * (s0 + s1);
+        let var = var.max(mid * (1.0 - mid) / 4.0);
+        n * (s1 - s0) * (2.0 * mean - s0 - s1) / (2.0 * var)
+    };
+    assert!(
+        (p["llr"].as_f64().unwrap() - llr).abs() < 1e-9,
+        "{p} vs {llr}"
+    );
+    let (lo, hi) = (
+        p["bounds"]["lower"].as_f64().unwrap(),
+        p["bounds"]["upper"].as_f64().unwrap(),
+    );
+    match status {
+        "accepted_h1" => assert!(llr >= hi),
+        "accepted_h0" => assert!(llr <= lo),
+        "inconclusive" => assert!(llr > lo && llr < hi && matches.len() == 6),
+        other => panic!("SPRT ended {other}: {p}"),
+    }
+    // An ended SPRT cannot be cancelled; a running one can, and its queued match with it.
+    let (code, _) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/sprt/{pid}"),
+        None,
+        Some(TOKEN),
+    );
+    assert_eq!(code, 409);
+    let (code, p2) = call(
+        a,
+        "POST",
+        "/api/v1/sprt",
+        Some(&json!({"a": 2, "b": 3, "rallies_per_match": 400, "seed": 1})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 202, "{p2}");
+    let pid2 = p2["id"].as_i64().unwrap();
+    let (code, c) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/sprt/{pid2}"),
+        None,
+        Some(TOKEN),
+    );
+    assert_eq!(
+        (code, c["status"].as_str()),
+        (200, Some("cancelled")),
+        "{c}"
+    );
+    assert!(
+        c["matches"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|m| m["status"] == "cancelled"),
+        "{c}"
+    );
 }

@@ -4,8 +4,9 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
+use axum::extract::multipart::MultipartError;
 use axum::extract::rejection::JsonRejection;
-use axum::extract::{DefaultBodyLimit, Path, Query, State};
+use axum::extract::{DefaultBodyLimit, FromRequest, Multipart, Path, Query, Request, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
@@ -15,6 +16,12 @@ use serde_json::{json, Value};
 
 use crate::{db, ratings, AppState};
 
+mod contests;
+use contests::{
+    cancel_sprt, cancel_tournament, create_sprt, create_tournament, get_rating_history, get_sprt,
+    get_tournament, list_sprts, list_tournaments,
+};
+
 /// A rejected request.
 #[derive(Debug)]
 pub struct ApiError {
@@ -22,6 +29,7 @@ pub struct ApiError {
     code: &'static str,
     message: String,
     field: Option<&'static str>,
+    retry_after: Option<u64>,
 }
 
 impl ApiError {
@@ -31,6 +39,7 @@ impl ApiError {
             code,
             message: message.into(),
             field: None,
+            retry_after: None,
         }
     }
 
@@ -65,7 +74,12 @@ impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let body =
             json!({"error": {"code": self.code, "message": self.message, "field": self.field}});
-        (self.status, Json(body)).into_response()
+        let mut r = (self.status, Json(body)).into_response();
+        if let Some(secs) = self.retry_after {
+            r.headers_mut()
+                .insert(header::RETRY_AFTER, header::HeaderValue::from(secs));
+        }
+        r
     }
 }
 
@@ -118,9 +132,20 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(healthz))
         .route("/agents", get(list_agents).post(submit_agent))
         .route("/agents/{id}", get(get_agent))
+        .route("/agents/{id}/ratings", get(get_rating_history))
         .route("/matches", get(list_matches).post(queue_match))
         .route("/matches/{id}", get(get_match).delete(cancel_match))
         .route("/matches/{id}/replay", get(get_replay))
+        .route(
+            "/tournaments",
+            get(list_tournaments).post(create_tournament),
+        )
+        .route(
+            "/tournaments/{id}",
+            get(get_tournament).delete(cancel_tournament),
+        )
+        .route("/sprt", get(list_sprts).post(create_sprt))
+        .route("/sprt/{id}", get(get_sprt).delete(cancel_sprt))
         .route("/leaderboard", get(leaderboard))
         .route("/tokens", axum::routing::post(issue_token))
         .route("/metrics", get(metrics))
@@ -266,13 +291,63 @@ struct SubmitAgent {
     checkpoint: Value,
 }
 
-async fn submit_agent(
-    State(s): State<AppState>,
-    headers: HeaderMap,
-    body: Result<Json<SubmitAgent>, JsonRejection>,
-) -> ApiResult<Response> {
-    let caller = check_token(&s, &headers).await?;
-    let Json(body) = body?;
+/// Reads a multipart submission: a `name` text field and a `checkpoint` file (the checkpoint JSON).
+async fn read_multipart(mut form: Multipart) -> ApiResult<SubmitAgent> {
+    let bad_part = |e: MultipartError| ApiError::new(e.status(), "bad_multipart", e.body_text());
+    let (mut name, mut checkpoint) = (None, None);
+    while let Some(field) = form.next_field().await.map_err(bad_part)? {
+        match field.name().unwrap_or("") {
+            "name" => name = Some(field.text().await.map_err(bad_part)?),
+            "checkpoint" => {
+                let bytes = field.bytes().await.map_err(bad_part)?;
+                let v: Value = serde_json::from_slice(&bytes).map_err(|e| ApiError {
+                    field: Some("checkpoint"),
+                    ..ApiError::new(
+                        StatusCode::UNPROCESSABLE_ENTITY,
+                        "invalid_checkpoint",
+                        format!("the checkpoint file is not JSON: {e}"),
+                    )
+                })?;
+                checkpoint = Some(v);
+            }
+            other => {
+                return Err(ApiError::bad(
+                    "multipart",
+                    format!("unknown form field '{other}' (name, checkpoint)"),
+                ))
+            }
+        }
+    }
+    let missing = |f: &'static str| ApiError {
+        field: Some(f),
+        ..ApiError::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "missing_field",
+            format!("the form has no '{f}' field"),
+        )
+    };
+    Ok(SubmitAgent {
+        name: name.ok_or_else(|| missing("name"))?,
+        checkpoint: checkpoint.ok_or_else(|| missing("checkpoint"))?,
+    })
+}
+
+async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Response> {
+    let caller = check_token(&s, req.headers()).await?;
+    let multipart = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("multipart/form-data"));
+    let body = if multipart {
+        let form = Multipart::from_request(req, &s)
+            .await
+            .map_err(|e| ApiError::new(e.status(), "bad_multipart", e.body_text()))?;
+        read_multipart(form).await?
+    } else {
+        let Json(body) = Json::<SubmitAgent>::from_request(req, &s).await?;
+        body
+    };
     check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;
     if db::agents(&s.pool)
         .await?
@@ -349,10 +424,85 @@ struct QueueMatch {
     seed: Option<u64>,
 }
 
+/// Refuses a submitter token that would queue more than `max_matches_per_minute` matches within a
+/// minute with 429 and `Retry-After`; otherwise books the `n` matches. The admin is not limited.
+fn charge(s: &AppState, caller: Caller, n: u32) -> ApiResult<()> {
+    let Caller::Submitter(token) = caller else {
+        return Ok(());
+    };
+    let limit = s.settings.max_matches_per_minute;
+    let limited = |message: String, secs: u64| ApiError {
+        retry_after: Some(secs),
+        field: Some("rate"),
+        ..ApiError::new(StatusCode::TOO_MANY_REQUESTS, "rate_limited", message)
+    };
+    if n > limit {
+        return Err(limited(
+            format!("this request queues {n} matches; a token may queue at most {limit} a minute"),
+            60,
+        ));
+    }
+    let now = std::time::Instant::now();
+    let window = std::time::Duration::from_secs(60);
+    let mut log = s.rate.lock().unwrap_or_else(|e| e.into_inner());
+    let mine = log.entry(token).or_default();
+    while mine
+        .front()
+        .is_some_and(|(t, _)| now.duration_since(*t) >= window)
+    {
+        mine.pop_front();
+    }
+    let used: u32 = mine.iter().map(|x| x.1).sum();
+    if used + n > limit {
+        // When enough of the window's matches will have expired.
+        let mut freed = 0;
+        let mut wait = 60;
+        for (t, k) in mine.iter() {
+            freed += k;
+            if used - freed + n <= limit {
+                wait = (window - now.duration_since(*t)).as_secs() + 1;
+                break;
+            }
+        }
+        return Err(limited(
+            format!("this token queued {used} matches in the last minute (limit {limit}); retry in {wait} s"),
+            wait,
+        ));
+    }
+    mine.push_back((now, n));
+    Ok(())
+}
+
+/// The agent with id `id`, or 404 naming `field`.
+async fn agent_or_404(s: &AppState, id: i64, field: &'static str) -> ApiResult<db::Agent> {
+    db::agent(&s.pool, id).await?.ok_or_else(|| ApiError {
+        field: Some(field),
+        ..ApiError::not_found("agent", id)
+    })
+}
+
+/// A seed given, or one from the clock.
+fn seed_or_clock(seed: Option<u64>) -> ApiResult<u64> {
+    if seed.is_some_and(|x| x > i64::MAX as u64) {
+        return Err(ApiError::bad(
+            "seed",
+            format!("seed must be at most {}", i64::MAX),
+        ));
+    }
+    Ok(seed.unwrap_or_else(|| {
+        let t = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap_or_default();
+        (t.as_nanos() as u64) & (i64::MAX as u64)
+    }))
+}
+
 async fn queue_match(
     State(s): State<AppState>,
+    headers: HeaderMap,
     body: Result<Json<QueueMatch>, JsonRejection>,
 ) -> ApiResult<Response> {
+    let caller = check_token(&s, &headers).await?;
     let Json(q) = body?;
     if q.rallies == 0 || q.rallies > s.settings.max_rallies {
         return Err(ApiError::bad(
@@ -360,27 +510,20 @@ async fn queue_match(
             format!("rallies must be between 1 and {}", s.settings.max_rallies),
         ));
     }
-    if q.seed.is_some_and(|x| x > i64::MAX as u64) {
-        return Err(ApiError::bad(
-            "seed",
-            format!("seed must be at most {}", i64::MAX),
-        ));
-    }
-    let a = db::agent(&s.pool, q.a).await?.ok_or_else(|| ApiError {
-        field: Some("a"),
-        ..ApiError::not_found("agent", q.a)
-    })?;
-    let b = db::agent(&s.pool, q.b).await?.ok_or_else(|| ApiError {
-        field: Some("b"),
-        ..ApiError::not_found("agent", q.b)
-    })?;
-    let seed = q.seed.unwrap_or_else(|| {
-        let t = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap_or_default();
-        (t.as_nanos() as u64) & (i64::MAX as u64)
-    });
-    let id = db::queue_match(&s.pool, &a, &b, q.rallies, seed, true).await?;
+    let seed = seed_or_clock(q.seed)?;
+    let a = agent_or_404(&s, q.a, "a").await?;
+    let b = agent_or_404(&s, q.b, "b").await?;
+    charge(&s, caller, 1)?;
+    let id = db::queue_match(
+        &s.pool,
+        &a,
+        &b,
+        q.rallies,
+        seed,
+        true,
+        db::Origin::default(),
+    )
+    .await?;
     s.wake.notify_one();
     let m = db::match_row(&s.pool, id).await?;
     Ok((
@@ -435,13 +578,26 @@ async fn get_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiResu
     let drift: Option<Value> = db::drift(&s.pool, id)
         .await?
         .and_then(|d| serde_json::from_str(&d).ok());
+    let by_side: Vec<Value> = db::match_drift(&s.pool, id)
+        .await?
+        .into_iter()
+        .map(|(side, agent, d)| {
+            json!({"side": side, "agent_id": agent, "drift": serde_json::from_str::<Value>(&d).unwrap_or(Value::Null)})
+        })
+        .collect();
     let mut v = json!(m);
     v["rally_log"] = json!(rallies);
     v["drift"] = drift.unwrap_or(Value::Null);
+    v["drift_by_side"] = json!(by_side);
     Ok(Json(v))
 }
 
-async fn cancel_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Json<Value>> {
+async fn cancel_match(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
     let m = db::match_row(&s.pool, id)
         .await?
@@ -493,7 +649,7 @@ async fn get_replay(
             StatusCode::NOT_FOUND,
             "no_replay",
             format!(
-                "match {id} was scheduled by the continuous mode and keeps no replay; re-simulate it bit for bit with `rally match {na} {nb} --rallies {} --seed {} --replay replay.json`",
+                "match {id} keeps no replay (continuous-mode and SPRT matches do not); re-simulate it bit for bit with `rally match {na} {nb} --rallies {} --seed {} --replay replay.json`",
                 m.rallies, m.seed
             ),
         ));
@@ -531,8 +687,20 @@ pub async fn current_board(s: &AppState) -> ApiResult<Arc<ratings::Leaderboard>>
     }
     let agents = db::agents(&s.pool).await?;
     let outcomes = db::outcomes(&s.pool).await?;
+    let extras = ratings::Extras {
+        glicko: db::latest_glicko(&s.pool)
+            .await?
+            .into_iter()
+            .map(|(id, r, d)| (id, (r, d)))
+            .collect(),
+        drift: db::agent_drift(&s.pool)
+            .await?
+            .into_iter()
+            .map(|(id, b, e)| (id, (b, e)))
+            .collect(),
+    };
     let board = Arc::new(
-        tokio::task::spawn_blocking(move || ratings::leaderboard(&agents, &outcomes))
+        tokio::task::spawn_blocking(move || ratings::leaderboard(&agents, &outcomes, &extras))
             .await
             .map_err(|e| anyhow::anyhow!("{e}"))?,
     );

@@ -191,21 +191,35 @@ pub struct Match {
     pub drift_slope: Option<f64>,
     /// Why it failed.
     pub error: Option<String>,
+    /// The tournament it belongs to.
+    pub tournament_id: Option<i64>,
+    /// The SPRT it belongs to.
+    pub sprt_id: Option<i64>,
 }
 
-const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error";
+const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id";
 
-/// Queues a match.
-pub async fn queue_match(
-    pool: &SqlitePool,
+/// What queued a match, besides a plain request.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Origin {
+    /// A tournament.
+    pub tournament: Option<i64>,
+    /// An SPRT.
+    pub sprt: Option<i64>,
+}
+
+/// Queues a match (on the pool or inside a transaction).
+pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
+    db: E,
     a: &Agent,
     b: &Agent,
     rallies: u32,
     seed: u64,
     keep_replay: bool,
+    origin: Origin,
 ) -> sqlx::Result<i64> {
     let r = sqlx::query(
-        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued')",
+        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
     )
     .bind(a.id)
     .bind(b.id)
@@ -216,7 +230,9 @@ pub async fn queue_match(
     .bind(&a.spec_hash)
     .bind(&b.spec_hash)
     .bind(keep_replay)
-    .execute(pool)
+    .bind(origin.tournament)
+    .bind(origin.sprt)
+    .execute(db)
     .await?;
     Ok(r.last_insert_rowid())
 }
@@ -269,8 +285,8 @@ pub async fn store_result(
     // The first statement writes, so the transaction takes the write lock at once (waiting out other
     // writers) instead of upgrading a read lock later.
     let mut tx = pool.begin().await?;
-    let marked = sqlx::query(
-        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ? AND status = 'running'",
+    let marked: Option<(i64, i64, Option<i64>)> = sqlx::query_as(
+        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ? AND status = 'running' RETURNING agent_a, agent_b, sprt_id",
     )
     .bind(r.points[0] as i64)
     .bind(r.points[1] as i64)
@@ -281,12 +297,47 @@ pub async fn store_result(
     .bind(r.drift.drift_slope)
     .bind(serde_json::to_string(&r.drift).unwrap_or_default())
     .bind(id)
-    .execute(&mut *tx)
+    .fetch_optional(&mut *tx)
     .await?;
-    if marked.rows_affected() == 0 {
+    let Some((agent_a, agent_b, sprt_id)) = marked else {
         // Cancelled meanwhile: it stays cancelled and nothing is written.
         tx.rollback().await?;
         return Ok(false);
+    };
+    for (side, agent, d) in [
+        ("A", agent_a, &r.drift_by_player[0]),
+        ("B", agent_b, &r.drift_by_player[1]),
+    ] {
+        sqlx::query("INSERT INTO match_drift (match_id, side, agent_id, crossings, in_box_fraction, energy_distance, drift_slope, drift_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?)")
+            .bind(id)
+            .bind(side)
+            .bind(agent)
+            .bind(d.crossings as i64)
+            .bind(d.in_box_fraction)
+            .bind(d.energy_distance)
+            .bind(d.drift_slope)
+            .bind(serde_json::to_string(d).unwrap_or_default())
+            .execute(&mut *tx)
+            .await?;
+    }
+    if agent_a != agent_b {
+        // Glicko-2, online: both sides' last ratings, one game won by the side with more points.
+        let last = |agent: i64| {
+            sqlx::query_as::<_, (f64, f64, f64)>("SELECT rating, deviation, volatility FROM rating_history WHERE agent_id = ? ORDER BY seq DESC LIMIT 1").bind(agent)
+        };
+        let ra = last(agent_a).fetch_optional(&mut *tx).await?;
+        let rb = last(agent_b).fetch_optional(&mut *tx).await?;
+        let (na, nb) = crate::ratings::glicko2_step(ra, rb, r.points[0], r.points[1]);
+        for (agent, g) in [(agent_a, na), (agent_b, nb)] {
+            sqlx::query("INSERT INTO rating_history (match_id, agent_id, rating, deviation, volatility) VALUES (?, ?, ?, ?, ?)")
+                .bind(id)
+                .bind(agent)
+                .bind(g.0)
+                .bind(g.1)
+                .bind(g.2)
+                .execute(&mut *tx)
+                .await?;
+        }
     }
     for rally in &r.rallies {
         sqlx::query("INSERT INTO rallies (match_id, idx, server, length, end_reason, failing_side, duration) VALUES (?, ?, ?, ?, ?, ?, ?)")
@@ -322,28 +373,41 @@ pub async fn store_result(
                 .await?;
         }
     }
-
+    if let Some(sprt) = sprt_id {
+        sprt_step(&mut tx, sprt).await?;
+    }
     tx.commit().await?;
     Ok(true)
 }
 
-/// Marks a running match failed with a reason (one statement).
+/// Marks a running match failed with a reason; an SPRT it belonged to fails with it (one
+/// transaction).
 pub async fn fail(pool: &SqlitePool, id: i64, error: &str) -> sqlx::Result<()> {
-    sqlx::query("UPDATE matches SET status = 'failed', finished_at = CURRENT_TIMESTAMP, error = ? WHERE id = ? AND status = 'running'")
+    let mut tx = pool.begin().await?;
+    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = CURRENT_TIMESTAMP, error = ? WHERE id = ? AND status = 'running' RETURNING sprt_id")
         .bind(error)
         .bind(id)
-        .execute(pool)
+        .fetch_optional(&mut *tx)
         .await?;
-    Ok(())
+    if let Some((Some(sprt),)) = sprt {
+        end_sprt(&mut tx, sprt, "failed").await?;
+    }
+    tx.commit().await
 }
 
-/// Cancels a queued or running match; false if it had already finished (or does not exist).
+/// Cancels a queued or running match (and the SPRT it belongs to: it cannot go on without it);
+/// false if it had already finished (or does not exist).
 pub async fn cancel(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
-    let r = sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status IN ('queued', 'running')")
+    let mut tx = pool.begin().await?;
+    let r: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status IN ('queued', 'running') RETURNING sprt_id")
         .bind(id)
-        .execute(pool)
+        .fetch_optional(&mut *tx)
         .await?;
-    Ok(r.rows_affected() == 1)
+    if let Some((Some(sprt),)) = r {
+        end_sprt(&mut tx, sprt, "cancelled").await?;
+    }
+    tx.commit().await?;
+    Ok(r.is_some())
 }
 
 /// A stored rally.
@@ -443,4 +507,386 @@ pub async fn token_id(pool: &SqlitePool, token: &str) -> sqlx::Result<Option<i64
         .fetch_optional(pool)
         .await?;
     Ok(r.map(|x| x.0))
+}
+
+/// The latest Glicko-2 rating and deviation of every agent that has one.
+pub async fn latest_glicko(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, f64, f64)>> {
+    sqlx::query_as(
+        "SELECT agent_id, rating, deviation FROM rating_history h WHERE seq = (SELECT MAX(seq) FROM rating_history WHERE agent_id = h.agent_id)",
+    )
+    .fetch_all(pool)
+    .await
+}
+
+/// Per agent: mean over its finished matches of its own side's in-box fraction and serve → return
+/// energy distance (`match_drift`).
+pub async fn agent_drift(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<f64>, Option<f64>)>> {
+    sqlx::query_as("SELECT agent_id, AVG(in_box_fraction), AVG(energy_distance) FROM match_drift GROUP BY agent_id")
+        .fetch_all(pool)
+        .await
+}
+
+/// One point of an agent's rating history.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct RatingPoint {
+    /// Order in which matches finished (server-wide).
+    pub seq: i64,
+    /// The match after which it was computed.
+    pub match_id: i64,
+    /// Glicko-2 rating.
+    pub rating: f64,
+    /// Its deviation.
+    pub deviation: f64,
+    /// Its volatility.
+    pub volatility: f64,
+    /// When.
+    pub created_at: String,
+}
+
+/// An agent's rating history, oldest first.
+pub async fn rating_history(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<RatingPoint>> {
+    sqlx::query_as("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = ? ORDER BY seq")
+        .bind(agent)
+        .fetch_all(pool)
+        .await
+}
+
+/// The drift statistics of one side of a match: (side, agent, JSON).
+pub async fn match_drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<(String, i64, String)>> {
+    sqlx::query_as(
+        "SELECT side, agent_id, drift_json FROM match_drift WHERE match_id = ? ORDER BY side",
+    )
+    .bind(id)
+    .fetch_all(pool)
+    .await
+}
+
+/// A tournament row.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct Tournament {
+    /// Id.
+    pub id: i64,
+    /// round_robin | gauntlet.
+    pub kind: String,
+    /// Agent ids (JSON array) in the order given.
+    pub agents_json: String,
+    /// Rallies per match.
+    pub rallies_per_match: i64,
+    /// Rounds.
+    pub rounds: i64,
+    /// Seed of its first match (the k-th gets seed + k).
+    pub seed: i64,
+    /// When created.
+    pub created_at: String,
+}
+
+/// A tournament to create: its agents and the (side A, side B) index pairs of its matches.
+#[derive(Debug, Clone, Copy)]
+pub struct TournamentPlan<'a> {
+    /// round_robin | gauntlet.
+    pub kind: &'a str,
+    /// The agents in the order given.
+    pub agents: &'a [Agent],
+    /// Its matches, indices into `agents`.
+    pub pairs: &'a [(usize, usize)],
+    /// Rallies per match.
+    pub rallies: u32,
+    /// Rounds.
+    pub rounds: u32,
+    /// Seed of the first match.
+    pub seed: u64,
+    /// The submitter token that asked for it.
+    pub created_by: Option<i64>,
+}
+
+/// Creates a tournament and queues all its matches, in one transaction; the id and the match ids.
+pub async fn create_tournament(
+    pool: &SqlitePool,
+    plan: TournamentPlan<'_>,
+) -> sqlx::Result<(i64, Vec<i64>)> {
+    let TournamentPlan {
+        kind,
+        agents,
+        pairs,
+        rallies,
+        rounds,
+        seed,
+        created_by,
+    } = plan;
+    let mut tx = pool.begin().await?;
+    let ids: Vec<i64> = agents.iter().map(|a| a.id).collect();
+    let t = sqlx::query("INSERT INTO tournaments (kind, agents_json, rallies_per_match, rounds, seed, created_by) VALUES (?, ?, ?, ?, ?, ?)")
+        .bind(kind)
+        .bind(serde_json::to_string(&ids).unwrap_or_default())
+        .bind(rallies as i64)
+        .bind(rounds as i64)
+        .bind(seed as i64)
+        .bind(created_by)
+        .execute(&mut *tx)
+        .await?
+        .last_insert_rowid();
+    let mut matches = Vec::with_capacity(pairs.len());
+    for (k, &(a, b)) in pairs.iter().enumerate() {
+        let origin = Origin {
+            tournament: Some(t),
+            sprt: None,
+        };
+        let seed = seed.wrapping_add(k as u64) & (i64::MAX as u64);
+        matches.push(
+            queue_match(
+                &mut *tx, &agents[a], &agents[b], rallies, seed, true, origin,
+            )
+            .await?,
+        );
+    }
+    tx.commit().await?;
+    Ok((t, matches))
+}
+
+/// One tournament.
+pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tournament>> {
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_at FROM tournaments WHERE id = ?")
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+}
+
+/// Tournaments, newest first.
+pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tournament>> {
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_at FROM tournaments ORDER BY id DESC LIMIT ?")
+        .bind(limit)
+        .fetch_all(pool)
+        .await
+}
+
+/// A tournament's matches in the order they were queued.
+pub async fn tournament_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
+    sqlx::query_as(&format!(
+        "SELECT {MATCH_COLUMNS} FROM matches WHERE tournament_id = ? ORDER BY id"
+    ))
+    .bind(id)
+    .fetch_all(pool)
+    .await
+}
+
+/// Cancels a tournament's queued and running matches; how many.
+pub async fn cancel_tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<u64> {
+    let r = sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE tournament_id = ? AND status IN ('queued', 'running')")
+        .bind(id)
+        .execute(pool)
+        .await?;
+    Ok(r.rows_affected())
+}
+
+/// An SPRT row.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct Sprt {
+    /// Id.
+    pub id: i64,
+    /// The agent tested.
+    pub agent_a: i64,
+    /// Its opponent.
+    pub agent_b: i64,
+    /// H0: A's Elo advantage on points is elo0.
+    pub elo0: f64,
+    /// H1: it is elo1.
+    pub elo1: f64,
+    /// False-positive rate.
+    pub alpha: f64,
+    /// False-negative rate.
+    pub beta: f64,
+    /// Rallies per match.
+    pub rallies_per_match: i64,
+    /// Matches after which it stops undecided.
+    pub max_matches: i64,
+    /// Seed of the first match (the k-th gets seed + k).
+    pub seed: i64,
+    /// running | accepted_h1 | accepted_h0 | inconclusive | failed | cancelled.
+    pub status: String,
+    /// Log-likelihood ratio after the finished matches.
+    pub llr: f64,
+    /// Finished matches.
+    pub matches_done: i64,
+    /// When created.
+    pub created_at: String,
+    /// When it ended.
+    pub finished_at: Option<String>,
+}
+
+const SPRT_COLUMNS: &str = "id, agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, llr, matches_done, created_at, finished_at";
+
+/// The parameters of a new SPRT.
+#[derive(Debug, Clone, Copy)]
+pub struct SprtParams {
+    /// H0 Elo.
+    pub elo0: f64,
+    /// H1 Elo.
+    pub elo1: f64,
+    /// False-positive rate.
+    pub alpha: f64,
+    /// False-negative rate.
+    pub beta: f64,
+    /// Rallies per match.
+    pub rallies: u32,
+    /// Most matches.
+    pub max_matches: u32,
+    /// First seed.
+    pub seed: u64,
+}
+
+/// Creates an SPRT and queues its first match, in one transaction; its id.
+pub async fn create_sprt(
+    pool: &SqlitePool,
+    a: &Agent,
+    b: &Agent,
+    p: SprtParams,
+    created_by: Option<i64>,
+) -> sqlx::Result<i64> {
+    let mut tx = pool.begin().await?;
+    let id = sqlx::query("INSERT INTO sprts (agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, created_by) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'running', ?)")
+        .bind(a.id)
+        .bind(b.id)
+        .bind(p.elo0)
+        .bind(p.elo1)
+        .bind(p.alpha)
+        .bind(p.beta)
+        .bind(p.rallies as i64)
+        .bind(p.max_matches as i64)
+        .bind(p.seed as i64)
+        .bind(created_by)
+        .execute(&mut *tx)
+        .await?
+        .last_insert_rowid();
+    let origin = Origin {
+        tournament: None,
+        sprt: Some(id),
+    };
+    queue_match(&mut *tx, a, b, p.rallies, p.seed, false, origin).await?;
+    tx.commit().await?;
+    Ok(id)
+}
+
+/// One SPRT.
+pub async fn sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Sprt>> {
+    sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+}
+
+/// SPRTs, newest first.
+pub async fn sprts(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
+    sqlx::query_as(&format!(
+        "SELECT {SPRT_COLUMNS} FROM sprts ORDER BY id DESC LIMIT ?"
+    ))
+    .bind(limit)
+    .fetch_all(pool)
+    .await
+}
+
+/// An SPRT's matches in order.
+pub async fn sprt_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
+    sqlx::query_as(&format!(
+        "SELECT {MATCH_COLUMNS} FROM matches WHERE sprt_id = ? ORDER BY id"
+    ))
+    .bind(id)
+    .fetch_all(pool)
+    .await
+}
+
+/// Ends a running SPRT with `status` and cancels its unfinished matches; false if it had ended.
+pub async fn end_sprt(
+    conn: &mut sqlx::SqliteConnection,
+    id: i64,
+    status: &str,
+) -> sqlx::Result<bool> {
+    let r = sqlx::query("UPDATE sprts SET status = ?, finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status = 'running'")
+        .bind(status)
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+    sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE sprt_id = ? AND status IN ('queued', 'running')")
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Cancels a running SPRT (one transaction); false if it had ended.
+pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
+    let mut tx = pool.begin().await?;
+    let ended = end_sprt(&mut tx, id, "cancelled").await?;
+    tx.commit().await?;
+    Ok(ended)
+}
+
+/// After one of its matches finished (inside the transaction that stored it): recomputes the SPRT's
+/// log-likelihood ratio over its finished matches, ends it when the ratio leaves the bounds or
+/// `max_matches` are played, and otherwise queues the next match (sides swapped every match, the
+/// k-th with seed plus k). One match at a time, so the test's course depends only on its seeds. SPRT
+/// matches keep no replay frames (re-simulate one from its seed).
+async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<()> {
+    let s: Option<Sprt> = sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
+        .bind(id)
+        .fetch_optional(&mut *conn)
+        .await?;
+    let Some(s) = s.filter(|s| s.status == "running") else {
+        return Ok(());
+    };
+    let done: Vec<(i64, i64, i64)> = sqlx::query_as("SELECT agent_a, points_a, points_b FROM matches WHERE sprt_id = ? AND status = 'done' ORDER BY id")
+        .bind(id)
+        .fetch_all(&mut *conn)
+        .await?;
+    let scores: Vec<f64> = done
+        .iter()
+        .filter(|d| d.1 + d.2 > 0)
+        .map(|&(a, pa, pb)| {
+            let mine = if a == s.agent_a { pa } else { pb };
+            mine as f64 / (pa + pb) as f64
+        })
+        .collect();
+    let llr = crate::ratings::sprt_llr(&scores, s.rallies_per_match as f64, s.elo0, s.elo1);
+    let (lower, upper) = crate::ratings::sprt_bounds(s.alpha, s.beta);
+    let n = done.len() as i64;
+    let status = if llr >= upper {
+        "accepted_h1"
+    } else if llr <= lower {
+        "accepted_h0"
+    } else if n >= s.max_matches {
+        "inconclusive"
+    } else {
+        "running"
+    };
+    sqlx::query("UPDATE sprts SET llr = ?, matches_done = ?, status = ?, finished_at = CASE WHEN ? = 'running' THEN NULL ELSE CURRENT_TIMESTAMP END WHERE id = ?")
+        .bind(llr)
+        .bind(n)
+        .bind(status)
+        .bind(status)
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+    if status != "running" {
+        return Ok(());
+    }
+    let sql = format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = ?");
+    let agent = |id: i64| sqlx::query_as::<_, Agent>(&sql).bind(id);
+    let a = agent(s.agent_a).fetch_one(&mut *conn).await?;
+    let b = agent(s.agent_b).fetch_one(&mut *conn).await?;
+    let (x, y) = if n % 2 == 0 { (&a, &b) } else { (&b, &a) };
+    let origin = Origin {
+        tournament: None,
+        sprt: Some(id),
+    };
+    let seed = (s.seed as u64).wrapping_add(n as u64) & (i64::MAX as u64);
+    queue_match(
+        &mut *conn,
+        x,
+        y,
+        s.rallies_per_match as u32,
+        seed,
+        false,
+        origin,
+    )
+    .await?;
+    Ok(())
 }

@@ -14,6 +14,7 @@ pub mod db;
 pub mod page;
 pub mod ratings;
 pub mod scheduler;
+pub mod tournament;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -54,6 +55,21 @@ pub struct Settings {
     /// Admin token (the `RALLY_ADMIN_TOKEN` environment variable overrides it); empty disables
     /// submissions.
     pub admin_token: String,
+    /// Matches a submitter token may queue per minute (plain matches, tournaments' and SPRTs'
+    /// first ones); the admin token is not limited.
+    #[serde(default = "default_matches_per_minute")]
+    pub max_matches_per_minute: u32,
+    /// Most matches one tournament may queue.
+    #[serde(default = "default_tournament_matches")]
+    pub max_tournament_matches: u32,
+}
+
+fn default_matches_per_minute() -> u32 {
+    600
+}
+
+fn default_tournament_matches() -> u32 {
+    2000
 }
 
 impl Settings {
@@ -68,6 +84,12 @@ impl Settings {
         }
         if !(s.continuous_pause_s.is_finite() && s.continuous_pause_s >= 0.0) {
             return Err("continuous_pause_s must be a non-negative number of seconds".into());
+        }
+        if s.max_matches_per_minute == 0 {
+            return Err("max_matches_per_minute must be positive".into());
+        }
+        if s.max_tournament_matches == 0 {
+            return Err("max_tournament_matches must be positive".into());
         }
         if s.qualification_episodes == 0 || s.qualification_episodes > 10_000 {
             return Err("qualification_episodes must be between 1 and 10000".into());
@@ -94,7 +116,13 @@ pub struct AppState {
     pub wake: Arc<Notify>,
     /// The last leaderboard computed, with the number of finished matches it was computed from.
     pub board: Arc<tokio::sync::Mutex<Option<CachedBoard>>>,
+    /// Matches each submitter token queued in the last minute (when, how many).
+    pub rate: Arc<std::sync::Mutex<RateLog>>,
 }
+
+/// Per submitter token id, the (time, matches) of its recent requests.
+pub type RateLog =
+    std::collections::HashMap<i64, std::collections::VecDeque<(std::time::Instant, u32)>>;
 
 /// Opens the database, applies the migrations, re-queues matches a previous process left running,
 /// registers the built-in agents, starts the workers and serves until SIGINT/SIGTERM.
@@ -140,6 +168,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         settings: Arc::new(settings),
         wake: Arc::new(Notify::new()),
         board: Arc::new(tokio::sync::Mutex::new(None)),
+        rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
     };
     db::register_builtins(&state.pool).await?;
     Ok(state)

@@ -3,7 +3,11 @@
 //! strength 1 — and reported on the Elo scale, `1500 + 400·log10 γ`, so the anchor sits at 1500.
 //! 95% intervals come from a seeded bootstrap over matches (deterministic: the same matches give the
 //! same leaderboard). Glicko-2 (the `skillratings` crate, default configuration) is an online view
-//! beside it: matches in the order they were queued, each one game won by the side with more points.
+//! beside it: each finished match one game won by the side with more points, applied in the order
+//! matches finished and kept as the rating history (`rating_history`, written with the match). The
+//! SPRT's log-likelihood ratio (fishtest's GSPRT) is here too.
+
+use std::collections::HashMap;
 
 use serde::Serialize;
 
@@ -75,11 +79,13 @@ pub struct Row {
     pub mean_rally_length: Option<f64>,
     /// Longest rally it played.
     pub max_rally_length: Option<i64>,
-    /// Fraction of its matches' crossings inside the serve box (mean over matches).
+    /// Fraction of the crossings it is answerable for — the serves and its own returns — inside the
+    /// serve box (mean over its matches).
     pub in_box_fraction: Option<f64>,
-    /// Serve → return energy distance of its matches (mean over matches that have one).
+    /// Energy distance between the serves' crossings and its own returns' (mean over its matches
+    /// that have one): how far its returns drift from the serve distribution.
     pub drift: Option<f64>,
-    /// Glicko-2 rating (online, one game per match).
+    /// Glicko-2 rating (online, one game per match, in the order matches finished).
     pub glicko2: f64,
     /// Its rating deviation.
     pub glicko2_deviation: f64,
@@ -111,8 +117,17 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[k]
 }
 
+/// What the leaderboard takes from elsewhere than the match outcomes.
+#[derive(Debug, Clone, Default)]
+pub struct Extras {
+    /// Each agent's latest Glicko-2 (rating, deviation) from the rating history.
+    pub glicko: HashMap<i64, (f64, f64)>,
+    /// Each agent's own drift over its matches: (mean in-box fraction, mean energy distance).
+    pub drift: HashMap<i64, (Option<f64>, Option<f64>)>,
+}
+
 /// Computes the leaderboard of `agents` from the finished matches.
-pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome]) -> Leaderboard {
+pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome], extras: &Extras) -> Leaderboard {
     let n = agents.len();
     let index = |id: i64| agents.iter().position(|a| a.id == id);
     let pairs: Vec<(usize, usize, f64, f64)> = outcomes
@@ -144,7 +159,13 @@ pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome]) -> Leaderboard {
             }
         }
     }
-    let glicko = glicko2(n, &pairs);
+    let glicko = |id: i64| {
+        extras
+            .glicko
+            .get(&id)
+            .copied()
+            .unwrap_or_else(glicko2_initial)
+    };
     let mut rows: Vec<Row> = agents
         .iter()
         .enumerate()
@@ -182,10 +203,10 @@ pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome]) -> Leaderboard {
                 points_won_pct: (decided > 0).then(|| 100.0 * won as f64 / decided as f64),
                 mean_rally_length: mean(mine.iter().map(|o| o.4).collect()),
                 max_rally_length: mine.iter().map(|o| o.5).max(),
-                in_box_fraction: mean(mine.iter().filter_map(|o| o.6).collect()),
-                drift: mean(mine.iter().filter_map(|o| o.7).collect()),
-                glicko2: glicko[i].rating,
-                glicko2_deviation: glicko[i].deviation,
+                in_box_fraction: extras.drift.get(&a.id).and_then(|d| d.0),
+                drift: extras.drift.get(&a.id).and_then(|d| d.1),
+                glicko2: glicko(a.id).0,
+                glicko2_deviation: glicko(a.id).1,
                 hit_rate: a.hit_rate,
                 success_rate: a.success_rate,
             }
@@ -205,31 +226,71 @@ pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome]) -> Leaderboard {
     }
 }
 
-/// Glicko-2 ratings of `n` agents after the matches `(a, b, points a, points b)` in order.
-fn glicko2(
-    n: usize,
-    pairs: &[(usize, usize, f64, f64)],
-) -> Vec<skillratings::glicko2::Glicko2Rating> {
+/// One Glicko-2 update (default configuration) after a match: the sides' previous (rating,
+/// deviation, volatility) — `None` for an agent that never played — and their points; one game won
+/// by the side with more points.
+pub fn glicko2_step(
+    a: Option<(f64, f64, f64)>,
+    b: Option<(f64, f64, f64)>,
+    points_a: u32,
+    points_b: u32,
+) -> ((f64, f64, f64), (f64, f64, f64)) {
     use skillratings::glicko2::{glicko2 as update, Glicko2Config, Glicko2Rating};
     use skillratings::Outcomes;
-    let config = Glicko2Config::new();
-    let mut r = vec![Glicko2Rating::new(); n];
-    for &(a, b, pa, pb) in pairs {
-        if a == b {
-            continue;
-        }
-        let outcome = if pa > pb {
-            Outcomes::WIN
-        } else if pa < pb {
-            Outcomes::LOSS
-        } else {
-            Outcomes::DRAW
-        };
-        let (x, y) = update(&r[a], &r[b], &outcome, &config);
-        r[a] = x;
-        r[b] = y;
+    let rating = |r: Option<(f64, f64, f64)>| match r {
+        Some((rating, deviation, volatility)) => Glicko2Rating {
+            rating,
+            deviation,
+            volatility,
+        },
+        None => Glicko2Rating::new(),
+    };
+    let outcome = match points_a.cmp(&points_b) {
+        std::cmp::Ordering::Greater => Outcomes::WIN,
+        std::cmp::Ordering::Less => Outcomes::LOSS,
+        std::cmp::Ordering::Equal => Outcomes::DRAW,
+    };
+    let (x, y) = update(&rating(a), &rating(b), &outcome, &Glicko2Config::new());
+    (
+        (x.rating, x.deviation, x.volatility),
+        (y.rating, y.deviation, y.volatility),
+    )
+}
+
+/// Glicko-2's starting rating and deviation (an agent that has not played).
+pub fn glicko2_initial() -> (f64, f64) {
+    let r = skillratings::glicko2::Glicko2Rating::new();
+    (r.rating, r.deviation)
+}
+
+/// The expected point share of a side `elo` Elo points stronger (the Bradley–Terry scale above).
+pub fn elo_to_score(elo: f64) -> f64 {
+    1.0 / (1.0 + 10f64.powf(-elo / 400.0))
+}
+
+/// The SPRT's log-likelihood ratio of H1 (A's Elo advantage on points is `elo1`) against H0 (it is
+/// `elo0`) after matches whose point shares for A are `scores`: the generalised SPRT of fishtest, a
+/// normal model of the per-match share, LLR = N (s1 − s0)(2 x̄ − s0 − s1) / (2 σ²), with σ² the sample
+/// variance but never below the binomial variance of a match of `points` independent points at the
+/// hypotheses' midpoint (so a few identical scores cannot decide it alone). 0 before two matches.
+pub fn sprt_llr(scores: &[f64], points: f64, elo0: f64, elo1: f64) -> f64 {
+    let n = scores.len();
+    if n < 2 {
+        return 0.0;
     }
-    r
+    let (s0, s1) = (elo_to_score(elo0), elo_to_score(elo1));
+    let mean = scores.iter().sum::<f64>() / n as f64;
+    let var = scores.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let mid = 0.5 * (s0 + s1);
+    let floor = mid * (1.0 - mid) / points.max(1.0);
+    let var = var.max(floor);
+    n as f64 * (s1 - s0) * (2.0 * mean - s0 - s1) / (2.0 * var)
+}
+
+/// Wald's bounds (lower, upper) on the log-likelihood ratio for error rates α and β: accept H0 at or
+/// below ln(β/(1−α)), H1 at or above ln((1−β)/α).
+pub fn sprt_bounds(alpha: f64, beta: f64) -> (f64, f64) {
+    ((beta / (1.0 - alpha)).ln(), ((1.0 - beta) / alpha).ln())
 }
 
 #[cfg(test)]
@@ -259,13 +320,54 @@ mod tests {
 
     #[test]
     fn glicko2_moves_the_winner_up_and_shrinks_deviations() {
-        let g = glicko2(3, &[(0, 1, 12.0, 8.0), (1, 0, 9.0, 11.0)]);
-        assert!(g[0].rating > 1500.0 && g[1].rating < 1500.0);
-        assert!(g[0].deviation < 350.0 && g[1].deviation < 350.0);
-        assert_eq!(
-            (g[2].rating, g[2].deviation),
-            (1500.0, 350.0),
-            "an agent that never played is untouched"
+        let (a, b) = glicko2_step(None, None, 12, 8);
+        assert!(a.0 > 1500.0 && b.0 < 1500.0);
+        assert!(a.1 < 350.0 && b.1 < 350.0);
+        // Two equal new players: the update is symmetric about 1500.
+        assert!((a.0 - 1500.0 + (b.0 - 1500.0)).abs() < 1e-9);
+        let (a2, _) = glicko2_step(Some(a), Some(b), 11, 9);
+        assert!(
+            a2.0 > a.0 && a2.1 < a.1,
+            "winning again raises it and narrows it"
         );
+        let (d, _) = glicko2_step(None, None, 10, 10);
+        assert!(
+            (d.0 - 1500.0).abs() < 1e-9,
+            "a draw between equals moves nothing"
+        );
+        assert_eq!(glicko2_initial(), (1500.0, 350.0));
+    }
+
+    #[test]
+    fn sprt_llr_matches_the_normal_closed_form() {
+        // Scores 0.6 and 0.7 alternating: mean 0.65, sample variance 0.005·(n/(n−1)).
+        let scores: Vec<f64> = (0..10)
+            .map(|k| if k % 2 == 0 { 0.6 } else { 0.7 })
+            .collect();
+        let (s0, s1) = (elo_to_score(0.0), elo_to_score(50.0));
+        let var = 10.0 * 0.0025 / 9.0;
+        let expected = 10.0 * (s1 - s0) * (2.0 * 0.65 - s0 - s1) / (2.0 * var);
+        let llr = sprt_llr(&scores, 1000.0, 0.0, 50.0);
+        assert!(
+            (llr - expected).abs() < 1e-9 * expected.abs(),
+            "{llr} vs {expected}"
+        );
+        assert!(llr > 0.0, "a mean above both hypotheses favours H1");
+        // At the midpoint of the hypotheses the evidence is nil; below it, it favours H0.
+        let mid = 0.5 * (s0 + s1);
+        assert!(sprt_llr(&[mid - 0.05, mid + 0.05], 20.0, 0.0, 50.0).abs() < 1e-12);
+        assert!(sprt_llr(&[0.4, 0.45, 0.42], 20.0, 0.0, 50.0) < 0.0);
+        assert_eq!(
+            sprt_llr(&[0.9], 20.0, 0.0, 50.0),
+            0.0,
+            "one match decides nothing"
+        );
+        // Identical scores use the binomial floor, not a zero variance.
+        let same = sprt_llr(&[0.6, 0.6, 0.6], 20.0, 0.0, 50.0);
+        let floor = mid * (1.0 - mid) / 20.0;
+        let expected = 3.0 * (s1 - s0) * (1.2 - s0 - s1) / (2.0 * floor);
+        assert!((same - expected).abs() < 1e-9);
+        let (lo, hi) = sprt_bounds(0.05, 0.05);
+        assert!((lo + 2.944_438_979).abs() < 1e-6 && (hi - 2.944_438_979).abs() < 1e-6);
     }
 }

@@ -188,6 +188,7 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
         state.settings.continuous_rallies,
         seed,
         false,
+        db::Origin::default(),
     )
     .await?;
     tracing::debug!(id, a = %a.name, b = %b.name, "continuous mode queued a match");

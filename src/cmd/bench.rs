@@ -457,6 +457,9 @@ fn load(addr: &str, path: &str, clients: usize, seconds: f64) -> anyhow::Result<
     Ok((all.len() as f64 / wall, q(0.5), q(0.99)))
 }
 
+/// The admin token of the server the benchmark starts.
+const BENCH_TOKEN: &str = "rally-bench-admin";
+
 fn call_json(
     addr: &str,
     method: &str,
@@ -467,7 +470,7 @@ fn call_json(
     let mut s = std::net::TcpStream::connect(addr)?;
     write!(
         s,
-        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nAuthorization: Bearer {BENCH_TOKEN}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
         body.len()
     )?;
     let mut resp = String::new();
@@ -502,6 +505,7 @@ pub fn server_bench(seconds: f64, clients: usize) -> anyhow::Result<serde_json::
         ])
         .arg(dir.join("bench.db"))
         .env("RUST_LOG", "warn")
+        .env("RALLY_ADMIN_TOKEN", BENCH_TOKEN)
         .stdout(std::process::Stdio::piped())
         .spawn()
         .context("starting rally serve")?;

@@ -1,0 +1,401 @@
+//! Tournaments, SPRTs and rating history: `/tournaments`, `/sprt`, `/agents/{id}/ratings`.
+
+use std::collections::HashMap;
+
+use axum::extract::rejection::JsonRejection;
+use axum::extract::{Path, Query, State};
+use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde::Deserialize;
+use serde_json::{json, Value};
+
+use super::{agent_or_404, charge, check_token, parse_id, seed_or_clock, ApiError, ApiResult};
+use crate::tournament::{self, Kind};
+use crate::{db, ratings, AppState};
+
+/// `?limit=` (1–1000, default 100); any other parameter is refused.
+fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {
+    if let Some(k) = q.keys().find(|k| k.as_str() != "limit") {
+        return Err(ApiError::bad(
+            "query",
+            format!("unknown query parameter '{k}' (limit)"),
+        ));
+    }
+    match q.get("limit") {
+        None => Ok(100),
+        Some(l) => l
+            .parse::<i64>()
+            .ok()
+            .filter(|l| (1..=1000).contains(l))
+            .ok_or_else(|| ApiError::bad("limit", "limit must be an integer from 1 to 1000")),
+    }
+}
+
+fn submitter(caller: super::Caller) -> Option<i64> {
+    match caller {
+        super::Caller::Admin => None,
+        super::Caller::Submitter(id) => Some(id),
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct NewTournament {
+    kind: String,
+    agents: Vec<i64>,
+    rallies_per_match: u32,
+    #[serde(default = "one")]
+    rounds: u32,
+    seed: Option<u64>,
+}
+
+fn one() -> u32 {
+    1
+}
+
+pub(super) async fn create_tournament(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    body: Result<Json<NewTournament>, JsonRejection>,
+) -> ApiResult<Response> {
+    let caller = check_token(&s, &headers).await?;
+    let Json(t) = body?;
+    let kind = Kind::parse(&t.kind)
+        .ok_or_else(|| ApiError::bad("kind", "kind must be round_robin or gauntlet"))?;
+    if t.agents.len() < 2 || t.agents.len() > 64 {
+        return Err(ApiError::bad("agents", "a tournament needs 2 to 64 agents"));
+    }
+    let mut seen = std::collections::HashSet::new();
+    if let Some(dup) = t.agents.iter().find(|a| !seen.insert(**a)) {
+        return Err(ApiError::bad(
+            "agents",
+            format!("agent {dup} is listed twice"),
+        ));
+    }
+    if t.rallies_per_match == 0 || t.rallies_per_match > s.settings.max_rallies {
+        return Err(ApiError::bad(
+            "rallies_per_match",
+            format!(
+                "rallies_per_match must be between 1 and {}",
+                s.settings.max_rallies
+            ),
+        ));
+    }
+    if t.rounds == 0 || t.rounds > 100 {
+        return Err(ApiError::bad("rounds", "rounds must be between 1 and 100"));
+    }
+    let pairs = tournament::pairs(kind, t.agents.len(), t.rounds);
+    if pairs.len() > s.settings.max_tournament_matches as usize {
+        return Err(ApiError::bad(
+            "agents",
+            format!(
+                "this tournament would queue {} matches; the limit is {}",
+                pairs.len(),
+                s.settings.max_tournament_matches
+            ),
+        ));
+    }
+    let seed = seed_or_clock(t.seed)?;
+    let mut agents = Vec::with_capacity(t.agents.len());
+    for &id in &t.agents {
+        agents.push(agent_or_404(&s, id, "agents").await?);
+    }
+    charge(&s, caller, pairs.len() as u32)?;
+    let plan = db::TournamentPlan {
+        kind: kind.name(),
+        agents: &agents,
+        pairs: &pairs,
+        rallies: t.rallies_per_match,
+        rounds: t.rounds,
+        seed,
+        created_by: submitter(caller),
+    };
+    let (id, _) = db::create_tournament(&s.pool, plan).await?;
+    s.wake.notify_waiters();
+    tracing::info!(
+        id,
+        kind = kind.name(),
+        matches = pairs.len(),
+        "tournament queued"
+    );
+    let v = tournament_view(&s, id).await?;
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, format!("/api/v1/tournaments/{id}"))],
+        Json(v),
+    )
+        .into_response())
+}
+
+/// A tournament with its progress, standings, cross-table and matches.
+async fn tournament_view(s: &AppState, id: i64) -> ApiResult<Value> {
+    let t = db::tournament(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("tournament", id))?;
+    let ids: Vec<i64> = serde_json::from_str(&t.agents_json)
+        .map_err(|e| anyhow::anyhow!("tournament {id}: stored agents unreadable: {e}"))?;
+    let mut agents = Vec::with_capacity(ids.len());
+    for aid in ids {
+        let name = db::agent(&s.pool, aid)
+            .await?
+            .map(|a| a.name)
+            .unwrap_or_else(|| format!("#{aid}"));
+        agents.push((aid, name));
+    }
+    let kind = Kind::parse(&t.kind).unwrap_or(Kind::RoundRobin);
+    let matches = db::tournament_matches(&s.pool, id).await?;
+    let view = tournament::view(kind, &agents, &matches);
+    let list: Vec<Value> = matches
+        .iter()
+        .map(|m| {
+            json!({"id": m.id, "agent_a": m.agent_a, "agent_b": m.agent_b, "status": m.status,
+                   "points_a": m.points_a, "points_b": m.points_b, "seed": m.seed})
+        })
+        .collect();
+    Ok(json!({
+        "id": t.id,
+        "kind": t.kind,
+        "agents": agents.iter().map(|(id, name)| json!({"id": id, "name": name})).collect::<Vec<_>>(),
+        "rallies_per_match": t.rallies_per_match,
+        "rounds": t.rounds,
+        "seed": t.seed,
+        "created_at": t.created_at,
+        "progress": view.progress,
+        "standings": view.standings,
+        "cross_table_agents": view.cross_table_agents,
+        "cross_table": view.cross_table,
+        "matches": list,
+    }))
+}
+
+pub(super) async fn get_tournament(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let id = parse_id(&id, "id")?;
+    Ok(Json(tournament_view(&s, id).await?))
+}
+
+pub(super) async fn list_tournaments(
+    State(s): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
+) -> ApiResult<Json<Value>> {
+    let limit = limit_only(&q)?;
+    let mut out = Vec::new();
+    for t in db::tournaments(&s.pool, limit).await? {
+        let v = tournament_view(&s, t.id).await?;
+        out.push(json!({"id": t.id, "kind": t.kind, "agents": v["agents"], "rallies_per_match": t.rallies_per_match,
+                        "rounds": t.rounds, "created_at": t.created_at, "progress": v["progress"]}));
+    }
+    Ok(Json(json!({ "tournaments": out })))
+}
+
+pub(super) async fn cancel_tournament(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    check_token(&s, &headers).await?;
+    let id = parse_id(&id, "id")?;
+    db::tournament(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("tournament", id))?;
+    if db::cancel_tournament(&s.pool, id).await? == 0 {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_cancellable",
+            format!("tournament {id} has no queued or running match left"),
+        ));
+    }
+    Ok(Json(tournament_view(&s, id).await?))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct NewSprt {
+    a: i64,
+    b: i64,
+    #[serde(default)]
+    elo0: f64,
+    #[serde(default = "default_elo1")]
+    elo1: f64,
+    #[serde(default = "default_error")]
+    alpha: f64,
+    #[serde(default = "default_error")]
+    beta: f64,
+    #[serde(default = "default_sprt_rallies")]
+    rallies_per_match: u32,
+    #[serde(default = "default_sprt_matches")]
+    max_matches: u32,
+    seed: Option<u64>,
+}
+
+fn default_elo1() -> f64 {
+    50.0
+}
+fn default_error() -> f64 {
+    0.05
+}
+fn default_sprt_rallies() -> u32 {
+    20
+}
+fn default_sprt_matches() -> u32 {
+    200
+}
+
+pub(super) async fn create_sprt(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    body: Result<Json<NewSprt>, JsonRejection>,
+) -> ApiResult<Response> {
+    let caller = check_token(&s, &headers).await?;
+    let Json(t) = body?;
+    if t.a == t.b {
+        return Err(ApiError::bad("b", "an SPRT needs two different agents"));
+    }
+    for (field, v) in [("elo0", t.elo0), ("elo1", t.elo1)] {
+        if !(v.is_finite() && v.abs() <= 1000.0) {
+            return Err(ApiError::bad(
+                field,
+                format!("{field} must be a number of Elo within ±1000"),
+            ));
+        }
+    }
+    if t.elo0 >= t.elo1 {
+        return Err(ApiError::bad("elo1", "elo1 must be greater than elo0"));
+    }
+    for (field, v) in [("alpha", t.alpha), ("beta", t.beta)] {
+        if !(v > 0.0 && v < 0.5) {
+            return Err(ApiError::bad(field, format!("{field} must be in (0, 0.5)")));
+        }
+    }
+    if t.rallies_per_match == 0 || t.rallies_per_match > s.settings.max_rallies {
+        return Err(ApiError::bad(
+            "rallies_per_match",
+            format!(
+                "rallies_per_match must be between 1 and {}",
+                s.settings.max_rallies
+            ),
+        ));
+    }
+    if !(2..=10_000).contains(&t.max_matches) {
+        return Err(ApiError::bad(
+            "max_matches",
+            "max_matches must be between 2 and 10000",
+        ));
+    }
+    let seed = seed_or_clock(t.seed)?;
+    let a = agent_or_404(&s, t.a, "a").await?;
+    let b = agent_or_404(&s, t.b, "b").await?;
+    charge(&s, caller, 1)?;
+    let params = db::SprtParams {
+        elo0: t.elo0,
+        elo1: t.elo1,
+        alpha: t.alpha,
+        beta: t.beta,
+        rallies: t.rallies_per_match,
+        max_matches: t.max_matches,
+        seed,
+    };
+    let id = db::create_sprt(&s.pool, &a, &b, params, submitter(caller)).await?;
+    s.wake.notify_one();
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, format!("/api/v1/sprt/{id}"))],
+        Json(sprt_view(&s, id).await?),
+    )
+        .into_response())
+}
+
+/// An SPRT with its bounds, the point share and Elo estimate so far, and its matches.
+async fn sprt_view(s: &AppState, id: i64) -> ApiResult<Value> {
+    let t = db::sprt(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("SPRT", id))?;
+    let matches = db::sprt_matches(&s.pool, id).await?;
+    let (lower, upper) = ratings::sprt_bounds(t.alpha, t.beta);
+    let mut shares = Vec::new();
+    let list: Vec<Value> = matches
+        .iter()
+        .map(|m| {
+            let share = match (m.points_a, m.points_b) {
+                (Some(pa), Some(pb)) if pa + pb > 0 => {
+                    let mine = if m.agent_a == t.agent_a { pa } else { pb };
+                    Some(mine as f64 / (pa + pb) as f64)
+                }
+                _ => None,
+            };
+            shares.extend(share);
+            json!({"id": m.id, "agent_a": m.agent_a, "agent_b": m.agent_b, "status": m.status,
+                   "points_a": m.points_a, "points_b": m.points_b, "seed": m.seed, "share_of_a": share})
+        })
+        .collect();
+    let mean = (!shares.is_empty()).then(|| shares.iter().sum::<f64>() / shares.len() as f64);
+    let elo = mean
+        .filter(|m| *m > 0.0 && *m < 1.0)
+        .map(|m| -400.0 * (1.0 / m - 1.0).log10());
+    let name = |aid: i64| async move {
+        db::agent(&s.pool, aid)
+            .await
+            .map(|a| a.map(|a| a.name).unwrap_or_else(|| format!("#{aid}")))
+    };
+    let mut v = json!(t);
+    v["agent_a_name"] = json!(name(t.agent_a).await?);
+    v["agent_b_name"] = json!(name(t.agent_b).await?);
+    v["bounds"] = json!({"lower": lower, "upper": upper});
+    v["mean_share_of_a"] = json!(mean);
+    v["elo_estimate"] = json!(elo);
+    v["matches"] = json!(list);
+    Ok(v)
+}
+
+pub(super) async fn get_sprt(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let id = parse_id(&id, "id")?;
+    Ok(Json(sprt_view(&s, id).await?))
+}
+
+pub(super) async fn list_sprts(
+    State(s): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
+) -> ApiResult<Json<Value>> {
+    let limit = limit_only(&q)?;
+    Ok(Json(json!({ "sprts": db::sprts(&s.pool, limit).await? })))
+}
+
+pub(super) async fn cancel_sprt(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    check_token(&s, &headers).await?;
+    let id = parse_id(&id, "id")?;
+    let t = db::sprt(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("SPRT", id))?;
+    if !db::cancel_sprt(&s.pool, id).await? {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_cancellable",
+            format!("SPRT {id} has ended ({})", t.status),
+        ));
+    }
+    Ok(Json(sprt_view(&s, id).await?))
+}
+
+pub(super) async fn get_rating_history(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let id = parse_id(&id, "id")?;
+    let a = db::agent(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("agent", id))?;
+    let history = db::rating_history(&s.pool, id).await?;
+    Ok(Json(
+        json!({"agent_id": id, "agent": a.name, "system": "glicko2", "history": history}),
+    ))
+}

@@ -1,0 +1,313 @@
+//! Tournaments: which matches a round robin or a gauntlet queues, and the view of one in progress —
+//! counts by status, standings and a cross-table of points between every two agents.
+
+use std::collections::HashMap;
+
+use serde::Serialize;
+
+use crate::db::Match;
+
+/// Kinds of tournament.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// Every pair of agents.
+    RoundRobin,
+    /// The first agent against each of the others.
+    Gauntlet,
+}
+
+impl Kind {
+    /// Parses `round_robin` or `gauntlet`.
+    pub fn parse(s: &str) -> Option<Kind> {
+        match s {
+            "round_robin" => Some(Kind::RoundRobin),
+            "gauntlet" => Some(Kind::Gauntlet),
+            _ => None,
+        }
+    }
+
+    /// The stored name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::RoundRobin => "round_robin",
+            Kind::Gauntlet => "gauntlet",
+        }
+    }
+}
+
+/// The matches of a tournament of `n` agents as (side A, side B) indices, round after round; sides
+/// are swapped in every other round so that over two rounds each agent serves first equally often.
+pub fn pairs(kind: Kind, n: usize, rounds: u32) -> Vec<(usize, usize)> {
+    let once: Vec<(usize, usize)> = match kind {
+        Kind::RoundRobin => (0..n)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .collect(),
+        Kind::Gauntlet => (1..n).map(|j| (0, j)).collect(),
+    };
+    (0..rounds)
+        .flat_map(|r| {
+            once.iter()
+                .map(move |&(i, j)| if r % 2 == 0 { (i, j) } else { (j, i) })
+        })
+        .collect()
+}
+
+/// How far a tournament has got.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct Progress {
+    /// Matches in it.
+    pub total: usize,
+    /// Waiting for a worker.
+    pub queued: usize,
+    /// Being played.
+    pub running: usize,
+    /// Finished and stored.
+    pub done: usize,
+    /// Failed.
+    pub failed: usize,
+    /// Cancelled.
+    pub cancelled: usize,
+    /// Finished (done, failed or cancelled) / total.
+    pub fraction: f64,
+    /// "running" while any match is queued or running, else "finished".
+    pub state: &'static str,
+}
+
+/// One agent's line in the standings.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Standing {
+    /// 1-based place: by points won %, then points won, then id.
+    pub place: usize,
+    /// Agent id.
+    pub agent_id: i64,
+    /// Agent name.
+    pub agent: String,
+    /// Finished matches.
+    pub matches: usize,
+    /// Matches with more points than the opponent.
+    pub wins: usize,
+    /// Matches with as many.
+    pub draws: usize,
+    /// Matches with fewer.
+    pub losses: usize,
+    /// Points won.
+    pub points_for: i64,
+    /// Points lost.
+    pub points_against: i64,
+    /// Points won / points decided, percent (null before a point).
+    pub points_won_pct: Option<f64>,
+}
+
+/// A cell of the cross-table: the row agent's record against the column agent.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct Cell {
+    /// Finished matches between the two.
+    pub matches: usize,
+    /// Points the row agent won.
+    pub points_for: i64,
+    /// Points it lost.
+    pub points_against: i64,
+}
+
+/// A tournament's state.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct View {
+    /// Counts by status.
+    pub progress: Progress,
+    /// Standings, best first.
+    pub standings: Vec<Standing>,
+    /// Agent names in the order given (rows and columns of `cross_table`).
+    pub cross_table_agents: Vec<String>,
+    /// `cross_table[i][j]`: agent i against agent j (null on the diagonal and for pairs that do not
+    /// meet, e.g. two challengers of a gauntlet).
+    pub cross_table: Vec<Vec<Option<Cell>>>,
+}
+
+/// The view of a tournament among `agents` (id, name), from its matches.
+pub fn view(kind: Kind, agents: &[(i64, String)], matches: &[Match]) -> View {
+    let n = agents.len();
+    let index: HashMap<i64, usize> = agents.iter().enumerate().map(|(k, a)| (a.0, k)).collect();
+    let mut progress = Progress {
+        total: matches.len(),
+        ..Progress::default()
+    };
+    let mut table: Vec<Vec<Option<Cell>>> = vec![vec![None; n]; n];
+    for (i, j) in pairs(kind, n, 1) {
+        table[i][j] = Some(Cell::default());
+        table[j][i] = Some(Cell::default());
+    }
+    let mut standings: Vec<Standing> = agents
+        .iter()
+        .map(|(id, name)| Standing {
+            place: 0,
+            agent_id: *id,
+            agent: name.clone(),
+            matches: 0,
+            wins: 0,
+            draws: 0,
+            losses: 0,
+            points_for: 0,
+            points_against: 0,
+            points_won_pct: None,
+        })
+        .collect();
+    for m in matches {
+        match m.status.as_str() {
+            "queued" => progress.queued += 1,
+            "running" => progress.running += 1,
+            "failed" => progress.failed += 1,
+            "cancelled" => progress.cancelled += 1,
+            _ => progress.done += 1,
+        }
+        let (Some(pa), Some(pb)) = (m.points_a, m.points_b) else {
+            continue;
+        };
+        let (Some(&i), Some(&j)) = (index.get(&m.agent_a), index.get(&m.agent_b)) else {
+            continue;
+        };
+        for (me, them, won, lost) in [(i, j, pa, pb), (j, i, pb, pa)] {
+            let s = &mut standings[me];
+            s.matches += 1;
+            s.points_for += won;
+            s.points_against += lost;
+            match won.cmp(&lost) {
+                std::cmp::Ordering::Greater => s.wins += 1,
+                std::cmp::Ordering::Equal => s.draws += 1,
+                std::cmp::Ordering::Less => s.losses += 1,
+            }
+            let cell = table[me][them].get_or_insert_with(Cell::default);
+            cell.matches += 1;
+            cell.points_for += won;
+            cell.points_against += lost;
+        }
+    }
+    let finished = progress.done + progress.failed + progress.cancelled;
+    progress.fraction = if progress.total == 0 {
+        1.0
+    } else {
+        finished as f64 / progress.total as f64
+    };
+    progress.state = if progress.queued + progress.running > 0 {
+        "running"
+    } else {
+        "finished"
+    };
+    for s in &mut standings {
+        let decided = s.points_for + s.points_against;
+        s.points_won_pct = (decided > 0).then(|| 100.0 * s.points_for as f64 / decided as f64);
+    }
+    standings.sort_by(|x, y| {
+        y.points_won_pct
+            .unwrap_or(-1.0)
+            .total_cmp(&x.points_won_pct.unwrap_or(-1.0))
+            .then(y.points_for.cmp(&x.points_for))
+            .then(x.agent_id.cmp(&y.agent_id))
+    });
+    for (k, s) in standings.iter_mut().enumerate() {
+        s.place = k + 1;
+    }
+    View {
+        progress,
+        standings,
+        cross_table_agents: agents.iter().map(|a| a.1.clone()).collect(),
+        cross_table: table,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_robin_meets_every_pair_once_a_round_with_sides_swapped() {
+        let p = pairs(Kind::RoundRobin, 4, 2);
+        assert_eq!(p.len(), 12);
+        let (r0, r1) = p.split_at(6);
+        for (x, y) in r0.iter().zip(r1) {
+            assert_eq!((x.0, x.1), (y.1, y.0));
+        }
+        let mut unordered: Vec<(usize, usize)> =
+            r0.iter().map(|&(a, b)| (a.min(b), a.max(b))).collect();
+        unordered.sort();
+        unordered.dedup();
+        assert_eq!(unordered.len(), 6, "every pair once");
+        assert_eq!(pairs(Kind::Gauntlet, 4, 1), vec![(0, 1), (0, 2), (0, 3)]);
+        assert_eq!(
+            pairs(Kind::Gauntlet, 3, 2),
+            vec![(0, 1), (0, 2), (1, 0), (2, 0)]
+        );
+    }
+
+    fn m(id: i64, a: i64, b: i64, status: &str, points: Option<(i64, i64)>) -> Match {
+        Match {
+            id,
+            agent_a: a,
+            agent_b: b,
+            rallies: 10,
+            seed: id,
+            preset: "myochallenge".into(),
+            sim_version: "x".into(),
+            spec_hash_a: String::new(),
+            spec_hash_b: String::new(),
+            keep_replay: true,
+            status: status.into(),
+            created_at: String::new(),
+            started_at: None,
+            finished_at: None,
+            points_a: points.map(|p| p.0),
+            points_b: points.map(|p| p.1),
+            mean_rally_length: None,
+            max_rally_length: None,
+            in_box_fraction: None,
+            energy_distance: None,
+            drift_slope: None,
+            error: None,
+            tournament_id: Some(1),
+            sprt_id: None,
+        }
+    }
+
+    #[test]
+    fn view_counts_standings_and_cross_table() {
+        let agents = vec![
+            (10, "x".to_string()),
+            (20, "y".to_string()),
+            (30, "z".to_string()),
+        ];
+        let matches = vec![
+            m(1, 10, 20, "done", Some((7, 3))),
+            m(2, 10, 30, "done", Some((4, 6))),
+            m(3, 20, 30, "running", None),
+            m(4, 20, 10, "done", Some((5, 5))),
+            m(5, 30, 20, "cancelled", None),
+        ];
+        let v = view(Kind::RoundRobin, &agents, &matches);
+        assert_eq!(
+            (
+                v.progress.total,
+                v.progress.done,
+                v.progress.running,
+                v.progress.cancelled
+            ),
+            (5, 3, 1, 1)
+        );
+        assert!((v.progress.fraction - 0.8).abs() < 1e-12);
+        assert_eq!(v.progress.state, "running");
+        // x: 7+4+5 = 16 for, 3+6+5 = 14 against; y: 3+5 = 8 for, 12 against; z: 6 for, 4 against.
+        let x = v.standings.iter().find(|s| s.agent == "x").unwrap();
+        assert_eq!((x.matches, x.wins, x.draws, x.losses), (3, 1, 1, 1));
+        assert_eq!((x.points_for, x.points_against), (16, 14));
+        assert_eq!(v.standings[0].agent, "z", "60% beats 53%");
+        assert_eq!(v.standings[2].agent, "y");
+        let xy = v.cross_table[0][1].as_ref().unwrap();
+        assert_eq!((xy.matches, xy.points_for, xy.points_against), (2, 12, 8));
+        let yx = v.cross_table[1][0].as_ref().unwrap();
+        assert_eq!((yx.points_for, yx.points_against), (8, 12));
+        assert!(v.cross_table[0][0].is_none());
+        assert_eq!(v.cross_table[1][2].as_ref().unwrap().matches, 0);
+        // A gauntlet's challengers never meet.
+        let g = view(Kind::Gauntlet, &agents, &[]);
+        assert!(g.cross_table[1][2].is_none() && g.cross_table[0][2].is_some());
+        assert_eq!(g.progress.state, "finished");
+    }
+}
