@@ -21,6 +21,8 @@ struct Cli {
 enum Command {
     /// Simulate a free ball (a serve, or a state you give) and print its flight as JSON lines.
     Ball(Box<cmd::ball::BallArgs>),
+    /// Submit a plan of matches and tournaments to a server, follow them, summarise, write CSV.
+    Batch(cmd::batch::BatchArgs),
     /// Measure simulator speed against MuJoCo on the same work.
     Bench(cmd::bench::BenchArgs),
     /// Write a template policy checkpoint, or validate one.
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Ball(args) => cmd::ball::run(&args),
+        Command::Batch(args) => cmd::batch::run(&args),
         Command::Bench(args) => cmd::bench::run(&args),
         Command::Model(args) => cmd::model::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),

@@ -1366,3 +1366,93 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         "{c}"
     );
 }
+
+#[test]
+fn batch_submits_a_plan_follows_it_and_writes_csv() {
+    let dir = tempdir("batch");
+    let srv = start(&dir, false);
+    let url = format!("http://{}", srv.addr);
+    let rally = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_rally"))
+            .arg("batch")
+            .args(args)
+            .env_remove("RALLY_TOKEN")
+            .output()
+            .unwrap()
+    };
+    // A plan naming an agent the server does not have submits nothing and exits 2.
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[[match]]\na = \"scripted\"\nb = \"ghost\"\n").unwrap();
+    let out = rally(&[bad.to_str().unwrap(), "--server", &url, "--token", TOKEN]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no agent named 'ghost'"));
+    let (_, list) = call(&srv.addr, "GET", "/api/v1/matches", None, None);
+    assert!(list["matches"].as_array().unwrap().is_empty());
+
+    let plan = dir.join("plan.toml");
+    std::fs::write(
+        &plan,
+        "rallies = 3\nseed = 5\n[[match]]\na = \"scripted\"\nb = 2\nrepeat = 2\n\
+         [[tournament]]\nkind = \"gauntlet\"\nagents = [\"scripted-soft\", \"scripted\", \"scripted-drive\"]\nrallies_per_match = 2\n",
+    )
+    .unwrap();
+    let csv = dir.join("out.csv");
+    let out = rally(&[
+        plan.to_str().unwrap(),
+        "--server",
+        &url,
+        "--token",
+        TOKEN,
+        "--csv",
+        csv.to_str().unwrap(),
+        "--poll",
+        "0.2",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("won %") && stdout.contains("tournament 1"),
+        "{stdout}"
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1 + 2 + 2,
+        "header, two matches, a gauntlet of two: {text}"
+    );
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for line in &lines[1..] {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f[col("status")], "done", "{line}");
+        let (_, m) = call(
+            &srv.addr,
+            "GET",
+            &format!("/api/v1/matches/{}", f[col("match_id")]),
+            None,
+            None,
+        );
+        assert_eq!(
+            f[col("points_a")],
+            m["points_a"].to_string(),
+            "{line} vs {m}"
+        );
+        assert_eq!(f[col("seed")], m["seed"].to_string());
+    }
+    // The repeat swapped sides and took the next seed.
+    let second: Vec<&str> = lines[2].split(',').collect();
+    assert_eq!(
+        (
+            second[col("agent_a")],
+            second[col("agent_b")],
+            second[col("seed")]
+        ),
+        ("scripted-drive", "scripted", "6")
+    );
+    assert_eq!(lines[3].split(',').nth(col("tournament_id")), Some("1"));
+}

@@ -2,6 +2,7 @@
 //! the exit code (2 for bad arguments, 1 for anything that failed while running).
 
 pub mod ball;
+pub mod batch;
 pub mod bench;
 pub mod checkpoint;
 pub mod eval;

@@ -1,0 +1,772 @@
+//! `rally batch PLAN.toml --server URL --token T`: submits the matches and tournaments of a plan to a
+//! running server, follows them with progress bars, prints a summary table and writes every match
+//! to CSV. Everything in the plan is checked (agent names resolved on the server) before the first
+//! submission, so a bad plan submits nothing.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context};
+use clap::Args;
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use serde::Deserialize;
+use serde_json::{json, Value};
+
+use super::CliError;
+
+/// Arguments of `rally batch`.
+#[derive(Args, Debug)]
+#[command(
+    after_help = "PLAN.toml lists [[match]] and [[tournament]] entries; agents are names or ids:\n\n\
+  rallies = 20                # default rallies per match\n\
+  seed = 1                    # first seed: entry k without a seed gets seed + k\n\n\
+  [[match]]\n\
+  a = \"scripted\"\n\
+  b = \"scripted-drive\"\n\
+  repeat = 2                  # optional: sides swap on odd repeats, seeds go up by one\n\n\
+  [[tournament]]\n\
+  kind = \"round_robin\"        # or \"gauntlet\": the first agent against each other one\n\
+  agents = [\"scripted\", \"scripted-drive\", \"scripted-soft\"]\n\
+  rallies_per_match = 10\n\
+  rounds = 2\n\n\
+The token may also come from RALLY_TOKEN. Exit status: 0 when every match finished, 1 when one\n\
+failed or was cancelled or the server refused a submission, 2 for a bad plan or arguments.\n\
+See examples/batch_plan.toml."
+)]
+pub struct BatchArgs {
+    /// The plan (TOML).
+    plan: PathBuf,
+    /// The server's base URL.
+    #[arg(long, default_value = "http://127.0.0.1:8080")]
+    server: String,
+    /// Bearer token (admin or submitter); default: the RALLY_TOKEN environment variable.
+    #[arg(long, env = "RALLY_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Where to write one CSV row per match (default: the plan's path with .csv).
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
+    /// Submit and print the ids, without following the matches.
+    #[arg(long)]
+    no_wait: bool,
+    /// Seconds between two polls of the server.
+    #[arg(long, default_value_t = 1.0, value_parser = super::parse_seconds)]
+    poll: f64,
+    /// Give up following after this many seconds (the matches go on on the server).
+    #[arg(long, default_value_t = 3600.0, value_parser = parse_timeout)]
+    timeout: f64,
+}
+
+fn parse_timeout(s: &str) -> Result<f64, String> {
+    let x: f64 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !(x.is_finite() && x > 0.0) {
+        return Err("must be a positive number of seconds".into());
+    }
+    Ok(x)
+}
+
+/// An agent in a plan: its name or its id.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum AgentRef {
+    Id(i64),
+    Name(String),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Plan {
+    #[serde(default = "default_rallies")]
+    rallies: u32,
+    #[serde(default = "default_seed")]
+    seed: u64,
+    #[serde(default, rename = "match")]
+    matches: Vec<PlanMatch>,
+    #[serde(default, rename = "tournament")]
+    tournaments: Vec<PlanTournament>,
+}
+
+fn default_rallies() -> u32 {
+    20
+}
+fn default_seed() -> u64 {
+    1
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlanMatch {
+    a: AgentRef,
+    b: AgentRef,
+    rallies: Option<u32>,
+    seed: Option<u64>,
+    #[serde(default = "one")]
+    repeat: u32,
+}
+
+fn one() -> u32 {
+    1
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlanTournament {
+    kind: String,
+    agents: Vec<AgentRef>,
+    rallies_per_match: Option<u32>,
+    #[serde(default = "one")]
+    rounds: u32,
+    seed: Option<u64>,
+}
+
+/// The HTTP side: JSON requests with the bearer token, 4xx/5xx turned into the server's message.
+struct Client {
+    base: String,
+    token: String,
+    http: ureq::Agent,
+}
+
+/// A refused request: status and the server's `error.message` (and field).
+#[derive(Debug)]
+struct Refused {
+    status: u16,
+    message: String,
+    retry_after: Option<u64>,
+}
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "HTTP {}: {}", self.status, self.message)
+    }
+}
+
+impl std::error::Error for Refused {}
+
+impl Client {
+    fn new(base: &str, token: String) -> Client {
+        let http: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .timeout_global(Some(Duration::from_secs(300)))
+            .build()
+            .into();
+        Client {
+            base: base.trim_end_matches('/').to_string(),
+            token,
+            http,
+        }
+    }
+
+    /// One request; Ok(body) on 2xx, Err(Refused) on a refusal, Err(other) when the server could not
+    /// be reached or answered something that is not JSON.
+    fn call(&self, method: &str, path: &str, body: Option<&Value>) -> anyhow::Result<Value> {
+        let url = format!("{}/api/v1{path}", self.base);
+        let auth = format!("Bearer {}", self.token);
+        let resp = match (method, body) {
+            ("GET", _) => self.http.get(&url).header("Authorization", &auth).call(),
+            ("POST", Some(b)) => self
+                .http
+                .post(&url)
+                .header("Authorization", &auth)
+                .send_json(b),
+            ("DELETE", _) => self.http.delete(&url).header("Authorization", &auth).call(),
+            _ => return Err(anyhow!("unsupported request {method} {path}")),
+        };
+        let mut resp = resp.map_err(|e| anyhow!("could not reach the server at {url}: {e}"))?;
+        let status = resp.status().as_u16();
+        let retry_after = resp
+            .headers()
+            .get("retry-after")
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.trim().parse().ok());
+        let v: Value = resp
+            .body_mut()
+            .read_json()
+            .map_err(|e| anyhow!("{method} {url}: HTTP {status}, the answer is not JSON: {e}"))?;
+        if (200..300).contains(&status) {
+            return Ok(v);
+        }
+        let mut message = v["error"]["message"]
+            .as_str()
+            .map(str::to_string)
+            .unwrap_or_else(|| v.to_string());
+        if let Some(field) = v["error"]["field"].as_str() {
+            message = format!("{message} (field '{field}')");
+        }
+        Err(Refused {
+            status,
+            message,
+            retry_after,
+        }
+        .into())
+    }
+
+    /// A POST that waits out rate limits (429 + Retry-After), telling `say` why it waits.
+    fn post_patiently(
+        &self,
+        path: &str,
+        body: &Value,
+        say: &dyn Fn(String),
+    ) -> anyhow::Result<Value> {
+        let mut waited = 0u64;
+        loop {
+            match self.call("POST", path, Some(body)) {
+                Err(e) => match e.downcast_ref::<Refused>() {
+                    Some(r) if r.status == 429 && waited < 600 => {
+                        let secs = r.retry_after.unwrap_or(5).clamp(1, 60);
+                        say(format!("rate limited; waiting {secs} s ({})", r.message));
+                        std::thread::sleep(Duration::from_secs(secs));
+                        waited += secs;
+                    }
+                    _ => return Err(e),
+                },
+                ok => return ok,
+            }
+        }
+    }
+}
+
+/// What the plan asks for, with agents resolved to ids.
+enum Job {
+    Match {
+        a: i64,
+        b: i64,
+        rallies: u32,
+        seed: u64,
+    },
+    Tournament {
+        body: Value,
+        label: String,
+    },
+}
+
+/// Turns the plan into requests, resolving agent names against the server's agents; a usage error
+/// for anything wrong, before anything is submitted.
+fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<Vec<Job>, String> {
+    let resolve = |r: &AgentRef, at: &str| -> Result<i64, String> {
+        match r {
+            AgentRef::Id(id) if ids.contains(id) => Ok(*id),
+            AgentRef::Id(id) => Err(format!("{at}: the server has no agent with id {id}")),
+            AgentRef::Name(n) => agents.get(n).copied().ok_or_else(|| {
+                let mut known: Vec<&str> = agents.keys().map(String::as_str).collect();
+                known.sort();
+                format!(
+                    "{at}: the server has no agent named '{n}' (it has: {})",
+                    known.join(", ")
+                )
+            }),
+        }
+    };
+    let mut out = Vec::new();
+    let mut k = 0u64;
+    for (i, m) in plan.matches.iter().enumerate() {
+        let at = format!("match {}", i + 1);
+        let (a, b) = (resolve(&m.a, &at)?, resolve(&m.b, &at)?);
+        let rallies = m.rallies.unwrap_or(plan.rallies);
+        if rallies == 0 {
+            return Err(format!("{at}: rallies must be at least 1"));
+        }
+        if m.repeat == 0 || m.repeat > 10_000 {
+            return Err(format!("{at}: repeat must be between 1 and 10000"));
+        }
+        let seed = m.seed.unwrap_or(plan.seed.wrapping_add(k));
+        for r in 0..m.repeat {
+            let (x, y) = if r % 2 == 0 { (a, b) } else { (b, a) };
+            out.push(Job::Match {
+                a: x,
+                b: y,
+                rallies,
+                seed: seed.wrapping_add(r as u64) & (i64::MAX as u64),
+            });
+        }
+        k += 1;
+    }
+    for (i, t) in plan.tournaments.iter().enumerate() {
+        let at = format!("tournament {}", i + 1);
+        if t.kind != "round_robin" && t.kind != "gauntlet" {
+            return Err(format!(
+                "{at}: kind must be round_robin or gauntlet, not '{}'",
+                t.kind
+            ));
+        }
+        let agents: Vec<i64> = t
+            .agents
+            .iter()
+            .map(|r| resolve(r, &at))
+            .collect::<Result<_, _>>()?;
+        let seed = t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64);
+        out.push(Job::Tournament {
+            body: json!({"kind": t.kind, "agents": agents, "rallies_per_match": t.rallies_per_match.unwrap_or(plan.rallies),
+                         "rounds": t.rounds, "seed": seed}),
+            label: format!("{}, {} agents", t.kind, agents.len()),
+        });
+        k += 1;
+    }
+    if out.is_empty() {
+        return Err("the plan has no [[match]] or [[tournament]] entry".into());
+    }
+    Ok(out)
+}
+
+/// Runs `rally batch`.
+pub fn run(args: &BatchArgs) -> Result<(), CliError> {
+    let text = std::fs::read_to_string(&args.plan).map_err(|e| {
+        CliError::Usage(format!("cannot read the plan {}: {e}", args.plan.display()))
+    })?;
+    let plan: Plan = toml::from_str(&text)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", args.plan.display())))?;
+    let token = args.token.clone().ok_or_else(|| {
+        CliError::Usage(
+            "no token: pass --token or set RALLY_TOKEN (a submitter or admin token)".into(),
+        )
+    })?;
+    if !(args.server.starts_with("http://") || args.server.starts_with("https://")) {
+        return Err(CliError::Usage(format!(
+            "--server must be an http:// URL, not '{}'",
+            args.server
+        )));
+    }
+    if args.server.starts_with("https://") {
+        return Err(CliError::Usage(
+            "https is not built into this client: reach the server over http (e.g. an SSH tunnel)"
+                .into(),
+        ));
+    }
+    let client = Client::new(&args.server, token);
+    let health = client.call("GET", "/healthz", None)?;
+    let listed = client.call("GET", "/agents", None)?;
+    let mut by_name = HashMap::new();
+    let mut names = HashMap::new();
+    for a in listed["agents"].as_array().into_iter().flatten() {
+        if let (Some(id), Some(name)) = (a["id"].as_i64(), a["name"].as_str()) {
+            by_name.insert(name.to_string(), id);
+            names.insert(id, name.to_string());
+        }
+    }
+    let ids: Vec<i64> = names.keys().copied().collect();
+    let jobs = jobs(&plan, &by_name, &ids)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", args.plan.display())))?;
+    eprintln!(
+        "server {} (simulator {}), {} agents; submitting {} entries",
+        args.server,
+        health["sim_version"].as_str().unwrap_or("?"),
+        names.len(),
+        jobs.len()
+    );
+
+    // Submit everything, remembering what went in so a refusal can say what to cancel.
+    let bars = MultiProgress::new();
+    let say = |m: String| {
+        let _ = bars.println(m);
+    };
+    let mut plain: Vec<i64> = Vec::new();
+    let mut tournaments: Vec<(i64, String, usize)> = Vec::new();
+    for job in &jobs {
+        let submitted = match job {
+            Job::Match {
+                a,
+                b,
+                rallies,
+                seed,
+            } => client
+                .post_patiently(
+                    "/matches",
+                    &json!({"a": a, "b": b, "rallies": rallies, "seed": seed}),
+                    &say,
+                )
+                .map(|m| plain.extend(m["id"].as_i64())),
+            Job::Tournament { body, label } => {
+                client.post_patiently("/tournaments", body, &say).map(|t| {
+                    let total = t["progress"]["total"].as_u64().unwrap_or(0) as usize;
+                    tournaments.extend(t["id"].as_i64().map(|id| (id, label.clone(), total)));
+                })
+            }
+        };
+        if let Err(e) = submitted {
+            let done = if plain.is_empty() && tournaments.is_empty() {
+                "nothing was submitted".to_string()
+            } else {
+                format!(
+                    "already submitted: matches {:?}, tournaments {:?} (DELETE them to cancel)",
+                    plain,
+                    tournaments.iter().map(|t| t.0).collect::<Vec<_>>()
+                )
+            };
+            return Err(CliError::Failed(
+                e.context(format!("a submission was refused; {done}")),
+            ));
+        }
+    }
+    eprintln!(
+        "submitted {} matches{}",
+        plain.len(),
+        if tournaments.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " and tournaments {}",
+                tournaments
+                    .iter()
+                    .map(|t| t.0.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
+    );
+    if args.no_wait {
+        println!(
+            "{}",
+            json!({"matches": plain, "tournaments": tournaments.iter().map(|t| t.0).collect::<Vec<_>>()})
+        );
+        return Ok(());
+    }
+
+    // Follow: one bar for the plain matches, one per tournament.
+    let style = ProgressStyle::with_template("{prefix:<34} {bar:30} {pos}/{len} matches {msg}")
+        .expect("valid template");
+    let plain_bar = (!plain.is_empty()).then(|| {
+        let b = bars.add(ProgressBar::new(plain.len() as u64));
+        b.set_style(style.clone());
+        b.set_prefix("matches");
+        b
+    });
+    let t_bars: Vec<ProgressBar> = tournaments
+        .iter()
+        .map(|(id, label, total)| {
+            let b = bars.add(ProgressBar::new(*total as u64));
+            b.set_style(style.clone());
+            b.set_prefix(format!("tournament {id}: {label}"));
+            b
+        })
+        .collect();
+    let finished = |s: &str| matches!(s, "done" | "failed" | "cancelled");
+    let started = Instant::now();
+    let mut rows: HashMap<i64, Value> = HashMap::new();
+    let mut views: Vec<Value> = vec![Value::Null; tournaments.len()];
+    loop {
+        for &id in &plain {
+            if rows
+                .get(&id)
+                .is_some_and(|m| finished(m["status"].as_str().unwrap_or("")))
+            {
+                continue;
+            }
+            let m = client.call("GET", &format!("/matches/{id}"), None)?;
+            rows.insert(id, m);
+        }
+        let plain_done = plain
+            .iter()
+            .filter(|id| {
+                rows.get(id)
+                    .is_some_and(|m| finished(m["status"].as_str().unwrap_or("")))
+            })
+            .count();
+        if let Some(b) = &plain_bar {
+            b.set_position(plain_done as u64);
+            let running = plain
+                .iter()
+                .filter(|id| rows.get(id).is_some_and(|m| m["status"] == "running"))
+                .count();
+            b.set_message(format!("({running} running)"));
+        }
+        let mut all_done = plain_done == plain.len();
+        for (k, (id, _, _)) in tournaments.iter().enumerate() {
+            if views[k]["progress"]["state"] == "finished" {
+                continue;
+            }
+            let v = client.call("GET", &format!("/tournaments/{id}"), None)?;
+            let p = &v["progress"];
+            let ended = ["done", "failed", "cancelled"]
+                .iter()
+                .map(|s| p[*s].as_u64().unwrap_or(0))
+                .sum::<u64>();
+            t_bars[k].set_position(ended);
+            t_bars[k].set_message(format!("({} running)", p["running"].as_u64().unwrap_or(0)));
+            all_done &= p["state"] == "finished";
+            views[k] = v;
+        }
+        if all_done {
+            break;
+        }
+        if started.elapsed().as_secs_f64() > args.timeout {
+            bars.clear().ok();
+            return Err(CliError::Failed(anyhow!(
+                "gave up following after {} s; the matches go on on the server",
+                args.timeout
+            )));
+        }
+        std::thread::sleep(Duration::from_secs_f64(args.poll));
+    }
+    for b in t_bars.iter().chain(plain_bar.iter()) {
+        b.finish();
+    }
+    // Full rows of the tournaments' matches, for the CSV and the summary.
+    for v in &views {
+        for m in v["matches"].as_array().into_iter().flatten() {
+            if let Some(id) = m["id"].as_i64() {
+                let full = client.call("GET", &format!("/matches/{id}"), None)?;
+                rows.insert(id, full);
+            }
+        }
+    }
+    let mut order: Vec<i64> = plain.clone();
+    for v in &views {
+        order.extend(
+            v["matches"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|m| m["id"].as_i64()),
+        );
+    }
+    let csv_path = args
+        .csv
+        .clone()
+        .unwrap_or_else(|| args.plan.with_extension("csv"));
+    write_csv(&csv_path, &order, &rows, &names)
+        .with_context(|| format!("writing {}", csv_path.display()))?;
+    print_summary(&order, &rows, &names);
+    for (v, (id, label, _)) in views.iter().zip(&tournaments) {
+        print_standings(*id, label, v);
+    }
+    println!("wrote {} ({} matches)", csv_path.display(), order.len());
+    let bad: Vec<String> = order
+        .iter()
+        .filter_map(|id| {
+            let s = rows.get(id)?["status"].as_str()?.to_string();
+            (s != "done").then(|| format!("{id} {s}"))
+        })
+        .collect();
+    if !bad.is_empty() {
+        return Err(CliError::Failed(anyhow!(
+            "{} of {} matches did not finish: {}",
+            bad.len(),
+            order.len(),
+            bad.join(", ")
+        )));
+    }
+    Ok(())
+}
+
+fn name_of(names: &HashMap<i64, String>, id: Option<i64>) -> String {
+    id.and_then(|i| names.get(&i).cloned())
+        .unwrap_or_else(|| id.map_or("?".into(), |i| format!("#{i}")))
+}
+
+fn write_csv(
+    path: &Path,
+    order: &[i64],
+    rows: &HashMap<i64, Value>,
+    names: &HashMap<i64, String>,
+) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_path(path)?;
+    let numbers = [
+        "rallies",
+        "seed",
+        "points_a",
+        "points_b",
+        "mean_rally_length",
+        "max_rally_length",
+        "in_box_fraction",
+        "energy_distance",
+        "drift_slope",
+    ];
+    let mut header = vec!["match_id", "tournament_id", "agent_a", "agent_b", "status"];
+    header.extend(numbers);
+    header.extend(["sim_version", "preset", "error"]);
+    w.write_record(&header)?;
+    let text = |v: &Value| match v {
+        Value::Null => String::new(),
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    };
+    for id in order {
+        let Some(m) = rows.get(id) else { continue };
+        let mut rec = vec![
+            id.to_string(),
+            text(&m["tournament_id"]),
+            name_of(names, m["agent_a"].as_i64()),
+            name_of(names, m["agent_b"].as_i64()),
+            text(&m["status"]),
+        ];
+        rec.extend(numbers.iter().map(|k| text(&m[*k])));
+        rec.extend(
+            ["sim_version", "preset", "error"]
+                .iter()
+                .map(|k| text(&m[*k])),
+        );
+        w.write_record(&rec)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// Per agent over the batch's finished matches: matches, wins/draws/losses, points, mean rally length.
+fn print_summary(order: &[i64], rows: &HashMap<i64, Value>, names: &HashMap<i64, String>) {
+    #[derive(Default)]
+    struct Line {
+        matches: usize,
+        w: usize,
+        d: usize,
+        l: usize,
+        pf: i64,
+        pa: i64,
+        rally_sum: f64,
+    }
+    let mut lines: HashMap<i64, Line> = HashMap::new();
+    for id in order {
+        let Some(m) = rows.get(id) else { continue };
+        let (Some(a), Some(b), Some(pa), Some(pb)) = (
+            m["agent_a"].as_i64(),
+            m["agent_b"].as_i64(),
+            m["points_a"].as_i64(),
+            m["points_b"].as_i64(),
+        ) else {
+            continue;
+        };
+        let mean = m["mean_rally_length"].as_f64().unwrap_or(0.0);
+        for (me, won, lost) in [(a, pa, pb), (b, pb, pa)] {
+            let x = lines.entry(me).or_default();
+            x.matches += 1;
+            x.pf += won;
+            x.pa += lost;
+            x.rally_sum += mean;
+            match won.cmp(&lost) {
+                std::cmp::Ordering::Greater => x.w += 1,
+                std::cmp::Ordering::Equal => x.d += 1,
+                std::cmp::Ordering::Less => x.l += 1,
+            }
+        }
+    }
+    let mut sorted: Vec<(i64, Line)> = lines.into_iter().collect();
+    let pct = |l: &Line| {
+        let n = l.pf + l.pa;
+        if n == 0 {
+            0.0
+        } else {
+            100.0 * l.pf as f64 / n as f64
+        }
+    };
+    sorted.sort_by(|x, y| pct(&y.1).total_cmp(&pct(&x.1)).then(x.0.cmp(&y.0)));
+    println!();
+    println!(
+        "{:<24} {:>7} {:>4} {:>4} {:>4} {:>7} {:>7} {:>8} {:>11}",
+        "agent", "matches", "W", "D", "L", "points", "lost", "won %", "mean rally"
+    );
+    for (id, l) in &sorted {
+        println!(
+            "{:<24} {:>7} {:>4} {:>4} {:>4} {:>7} {:>7} {:>7.1}% {:>11.2}",
+            name_of(names, Some(*id)),
+            l.matches,
+            l.w,
+            l.d,
+            l.l,
+            l.pf,
+            l.pa,
+            pct(l),
+            l.rally_sum / l.matches.max(1) as f64
+        );
+    }
+}
+
+/// A tournament's standings and cross-table (points won–lost), as the server computed them.
+fn print_standings(id: i64, label: &str, v: &Value) {
+    println!();
+    println!("tournament {id}: {label}");
+    let agents: Vec<String> = v["cross_table_agents"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|a| a.as_str().unwrap_or("?").to_string())
+        .collect();
+    print!("{:<24}", "");
+    for k in 0..agents.len() {
+        print!(" {:>9}", format!("[{}]", k + 1));
+    }
+    println!("   place");
+    for (i, name) in agents.iter().enumerate() {
+        print!("{:<24}", format!("[{}] {name}", i + 1));
+        for j in 0..agents.len() {
+            let c = &v["cross_table"][i][j];
+            let cell = if c.is_null() {
+                "-".to_string()
+            } else {
+                format!(
+                    "{}-{}",
+                    c["points_for"].as_i64().unwrap_or(0),
+                    c["points_against"].as_i64().unwrap_or(0)
+                )
+            };
+            print!(" {cell:>9}");
+        }
+        let place = v["standings"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .find(|s| s["agent"].as_str() == Some(name.as_str()))
+            .and_then(|s| s["place"].as_u64())
+            .map_or("?".into(), |p| p.to_string());
+        println!("   {place:>5}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan(text: &str) -> Plan {
+        toml::from_str(text).expect("a valid plan")
+    }
+
+    #[test]
+    fn repeats_swap_sides_and_count_seeds() {
+        let p = plan(
+            "rallies = 5\nseed = 10\n[[match]]\na = \"x\"\nb = 2\nrepeat = 3\n[[match]]\na = 2\nb = \"x\"\nseed = 99\n[[tournament]]\nkind = \"gauntlet\"\nagents = [\"x\", 2]\n",
+        );
+        let names: HashMap<String, i64> = [("x".to_string(), 1)].into();
+        let jobs = jobs(&p, &names, &[1, 2]).unwrap();
+        let m: Vec<(i64, i64, u32, u64)> = jobs
+            .iter()
+            .filter_map(|j| match j {
+                Job::Match {
+                    a,
+                    b,
+                    rallies,
+                    seed,
+                } => Some((*a, *b, *rallies, *seed)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            m,
+            vec![(1, 2, 5, 10), (2, 1, 5, 11), (1, 2, 5, 12), (2, 1, 5, 99)]
+        );
+        let Job::Tournament { body, .. } = &jobs[4] else {
+            panic!("a tournament last")
+        };
+        assert_eq!(body["agents"], json!([1, 2]));
+        assert_eq!(body["seed"], 12, "the third entry: seed + 2");
+        assert_eq!(body["rallies_per_match"], 5);
+    }
+
+    #[test]
+    fn bad_plans_are_refused_before_anything_is_sent() {
+        let names: HashMap<String, i64> = [("x".to_string(), 1)].into();
+        let unknown = plan("[[match]]\na = \"x\"\nb = \"nobody\"\n");
+        let e = jobs(&unknown, &names, &[1]).err().unwrap();
+        assert!(
+            e.contains("no agent named 'nobody'") && e.contains("it has: x"),
+            "{e}"
+        );
+        assert!(jobs(&plan("[[match]]\na = 1\nb = 7\n"), &names, &[1]).is_err());
+        assert!(
+            jobs(&plan("rallies = 3\n"), &names, &[1]).is_err(),
+            "empty plan"
+        );
+        let kind = plan("[[tournament]]\nkind = \"swiss\"\nagents = [1, 1]\n");
+        assert!(jobs(&kind, &names, &[1]).err().unwrap().contains("swiss"));
+        assert!(
+            toml::from_str::<Plan>("[[match]]\na = 1\nb = 2\nrally = 3\n").is_err(),
+            "unknown key"
+        );
+    }
+}
