@@ -1243,6 +1243,19 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     assert!(history
         .windows(2)
         .all(|w| w[1]["deviation"].as_f64() <= w[0]["deviation"].as_f64()));
+    // The agent's own drift, pooled over the same matches.
+    let (_, agent) = call(a, "GET", "/api/v1/agents/1", None, None);
+    assert_eq!(
+        agent["drift"]["matches"].as_u64(),
+        Some(history.len() as u64),
+        "{agent}"
+    );
+    assert!(agent["drift"]["crossings"].as_u64().unwrap() > 0, "{agent}");
+    let (_, metrics) = call(a, "GET", "/api/v1/metrics", None, None);
+    assert!(
+        metrics.as_str().unwrap().contains("rally_tournaments 1"),
+        "{metrics}"
+    );
     let (_, board) = call(a, "GET", "/api/v1/leaderboard", None, None);
     let row = board["rows"]
         .as_array()

@@ -181,7 +181,9 @@ async fn get_agent(State(s): State<AppState>, Path(id): Path<String>) -> ApiResu
     let a = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
-    Ok(Json(json!(a)))
+    let mut v = json!(a);
+    v["drift"] = json!(db::agent_drift_summary(&s.pool, id).await?);
+    Ok(Json(v))
 }
 
 /// Agent names: 1–64 characters of `A–Z a–z 0–9 _ . -`, not starting with `.` or `-`.
@@ -729,6 +731,29 @@ async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {
     }
     out.push_str(&format!("# HELP rally_agents Registered agents.\n# TYPE rally_agents gauge\nrally_agents {agents_n}\n"));
     out.push_str(&format!("# HELP rally_rallies_total Rallies stored.\n# TYPE rally_rallies_total counter\nrally_rallies_total {rallies_n}\n"));
+    let tallies: Vec<(String, i64)> = sqlx::query_as(
+        "SELECT 'sprt_' || status, COUNT(*) FROM sprts GROUP BY status UNION ALL SELECT 'tournaments', COUNT(*) FROM tournaments",
+    )
+    .fetch_all(&s.pool)
+    .await?;
+    out.push_str("# HELP rally_sprts SPRTs by status.\n# TYPE rally_sprts gauge\n");
+    for st in [
+        "running",
+        "accepted_h1",
+        "accepted_h0",
+        "inconclusive",
+        "failed",
+        "cancelled",
+    ] {
+        let key = format!("sprt_{st}");
+        let n = tallies.iter().find(|(k, _)| *k == key).map_or(0, |x| x.1);
+        out.push_str(&format!("rally_sprts{{status=\"{st}\"}} {n}\n"));
+    }
+    let t = tallies
+        .iter()
+        .find(|(k, _)| k == "tournaments")
+        .map_or(0, |x| x.1);
+    out.push_str(&format!("# HELP rally_tournaments Tournaments created.\n# TYPE rally_tournaments counter\nrally_tournaments {t}\n"));
     out.push_str(&format!(
         "# HELP rally_workers Match workers.\n# TYPE rally_workers gauge\nrally_workers {}\n",
         s.settings.workers

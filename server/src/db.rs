@@ -526,6 +526,34 @@ pub async fn agent_drift(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<f64
         .await
 }
 
+/// An agent's drift over its finished matches (its side's serves and returns, `match_drift`).
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct AgentDrift {
+    /// Matches with drift statistics.
+    pub matches: i64,
+    /// Crossings counted over them.
+    pub crossings: i64,
+    /// Fraction of those crossings inside the serve box (pooled over matches).
+    pub in_box_fraction: Option<f64>,
+    /// Mean serve → return energy distance (matches that have one).
+    pub energy_distance: Option<f64>,
+    /// Mean drift slope over exchange index (matches that have one).
+    pub drift_slope: Option<f64>,
+}
+
+/// The drift summary of one agent.
+pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<AgentDrift> {
+    sqlx::query_as(
+        "SELECT COUNT(*) AS matches, COALESCE(SUM(crossings), 0) AS crossings, \
+         SUM(in_box_fraction * crossings) / NULLIF(SUM(crossings), 0) AS in_box_fraction, \
+         AVG(energy_distance) AS energy_distance, AVG(drift_slope) AS drift_slope \
+         FROM match_drift WHERE agent_id = ?",
+    )
+    .bind(agent)
+    .fetch_one(pool)
+    .await
+}
+
 /// One point of an agent's rating history.
 #[derive(Debug, Clone, Serialize, FromRow)]
 pub struct RatingPoint {
