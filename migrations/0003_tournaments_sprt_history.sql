@@ -37,6 +37,9 @@ CREATE TABLE sprts (
 );
 
 ALTER TABLE matches ADD COLUMN tournament_id INTEGER REFERENCES tournaments (id);
+-- The submitter token that queued a match (null: the admin, or the server itself); a submitter may
+-- cancel only what its token queued.
+ALTER TABLE matches ADD COLUMN created_by INTEGER REFERENCES tokens (id);
 ALTER TABLE matches ADD COLUMN sprt_id INTEGER REFERENCES sprts (id);
 CREATE INDEX matches_tournament ON matches (tournament_id);
 CREATE INDEX matches_sprt ON matches (sprt_id);

@@ -1065,6 +1065,14 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     assert_eq!(code, 201, "{t}");
     let token = t["token"].as_str().unwrap().to_string();
     let bearer = format!("Bearer {token}");
+    let (_, t2) = call(
+        a,
+        "POST",
+        "/api/v1/tokens",
+        Some(&json!({"name": "other-lab"})),
+        Some(TOKEN),
+    );
+    let other = t2["token"].as_str().unwrap().to_string();
 
     // A checkpoint uploaded as a multipart form by the submitter token.
     let body = multipart(
@@ -1358,6 +1366,39 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     );
     assert_eq!(code, 202, "{p2}");
     let pid2 = p2["id"].as_i64().unwrap();
+    // A submitter cannot cancel what it did not queue; the admin can cancel anything.
+    let (code, e) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/sprt/{pid2}"),
+        None,
+        Some(&token),
+    );
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (403, Some("not_owner")),
+        "{e}"
+    );
+    let (code, e) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/tournaments/{tid}"),
+        None,
+        Some(&other),
+    );
+    assert_eq!(code, 403, "{e}");
+    let (code, e) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/tournaments/{tid}"),
+        None,
+        Some(&token),
+    );
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (409, Some("not_cancellable")),
+        "{e}"
+    );
     let (code, c) = call(
         a,
         "DELETE",

@@ -475,6 +475,29 @@ fn charge(s: &AppState, caller: Caller, n: u32) -> ApiResult<()> {
     Ok(())
 }
 
+/// The submitter token id of a caller (None for the admin).
+fn submitter(caller: Caller) -> Option<i64> {
+    match caller {
+        Caller::Admin => None,
+        Caller::Submitter(id) => Some(id),
+    }
+}
+
+/// The admin may cancel anything; a submitter only what its own token queued.
+fn may_cancel(caller: Caller, owner: Option<i64>, what: &str) -> ApiResult<()> {
+    match caller {
+        Caller::Admin => Ok(()),
+        Caller::Submitter(t) if owner == Some(t) => Ok(()),
+        Caller::Submitter(_) => Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            "not_owner",
+            format!(
+                "{what} was not queued with this token; only its owner or the admin may cancel it"
+            ),
+        )),
+    }
+}
+
 /// The agent with id `id`, or 404 naming `field`.
 async fn agent_or_404(s: &AppState, id: i64, field: &'static str) -> ApiResult<db::Agent> {
     db::agent(&s.pool, id).await?.ok_or_else(|| ApiError {
@@ -516,16 +539,11 @@ async fn queue_match(
     let a = agent_or_404(&s, q.a, "a").await?;
     let b = agent_or_404(&s, q.b, "b").await?;
     charge(&s, caller, 1)?;
-    let id = db::queue_match(
-        &s.pool,
-        &a,
-        &b,
-        q.rallies,
-        seed,
-        true,
-        db::Origin::default(),
-    )
-    .await?;
+    let origin = db::Origin {
+        created_by: submitter(caller),
+        ..db::Origin::default()
+    };
+    let id = db::queue_match(&s.pool, &a, &b, q.rallies, seed, true, origin).await?;
     s.wake.notify_one();
     let m = db::match_row(&s.pool, id).await?;
     Ok((
@@ -599,11 +617,12 @@ async fn cancel_match(
     headers: HeaderMap,
     Path(id): Path<String>,
 ) -> ApiResult<Json<Value>> {
-    check_token(&s, &headers).await?;
+    let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
     let m = db::match_row(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("match", id))?;
+    may_cancel(caller, m.created_by, &format!("match {id}"))?;
     if !db::cancel(&s.pool, id).await? {
         return Err(ApiError::new(
             StatusCode::CONFLICT,

@@ -195,9 +195,11 @@ pub struct Match {
     pub tournament_id: Option<i64>,
     /// The SPRT it belongs to.
     pub sprt_id: Option<i64>,
+    /// The submitter token that queued it (null: the admin or the server).
+    pub created_by: Option<i64>,
 }
 
-const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id";
+const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by";
 
 /// What queued a match, besides a plain request.
 #[derive(Debug, Clone, Copy, Default)]
@@ -206,6 +208,8 @@ pub struct Origin {
     pub tournament: Option<i64>,
     /// An SPRT.
     pub sprt: Option<i64>,
+    /// The submitter token that asked for it.
+    pub created_by: Option<i64>,
 }
 
 /// Queues a match (on the pool or inside a transaction).
@@ -219,7 +223,7 @@ pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
     origin: Origin,
 ) -> sqlx::Result<i64> {
     let r = sqlx::query(
-        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
+        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id, created_by) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?)",
     )
     .bind(a.id)
     .bind(b.id)
@@ -232,6 +236,7 @@ pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
     .bind(keep_replay)
     .bind(origin.tournament)
     .bind(origin.sprt)
+    .bind(origin.created_by)
     .execute(db)
     .await?;
     Ok(r.last_insert_rowid())
@@ -604,6 +609,8 @@ pub struct Tournament {
     pub rounds: i64,
     /// Seed of its first match (the k-th gets seed + k).
     pub seed: i64,
+    /// The submitter token that created it (null: the admin).
+    pub created_by: Option<i64>,
     /// When created.
     pub created_at: String,
 }
@@ -658,6 +665,7 @@ pub async fn create_tournament(
         let origin = Origin {
             tournament: Some(t),
             sprt: None,
+            created_by,
         };
         let seed = seed.wrapping_add(k as u64) & (i64::MAX as u64);
         matches.push(
@@ -673,7 +681,7 @@ pub async fn create_tournament(
 
 /// One tournament.
 pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tournament>> {
-    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_at FROM tournaments WHERE id = ?")
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments WHERE id = ?")
         .bind(id)
         .fetch_optional(pool)
         .await
@@ -681,7 +689,7 @@ pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tourn
 
 /// Tournaments, newest first.
 pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tournament>> {
-    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_at FROM tournaments ORDER BY id DESC LIMIT ?")
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments ORDER BY id DESC LIMIT ?")
         .bind(limit)
         .fetch_all(pool)
         .await
@@ -735,13 +743,15 @@ pub struct Sprt {
     pub llr: f64,
     /// Finished matches.
     pub matches_done: i64,
+    /// The submitter token that created it (null: the admin).
+    pub created_by: Option<i64>,
     /// When created.
     pub created_at: String,
     /// When it ended.
     pub finished_at: Option<String>,
 }
 
-const SPRT_COLUMNS: &str = "id, agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, llr, matches_done, created_at, finished_at";
+const SPRT_COLUMNS: &str = "id, agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, llr, matches_done, created_by, created_at, finished_at";
 
 /// The parameters of a new SPRT.
 #[derive(Debug, Clone, Copy)]
@@ -788,6 +798,7 @@ pub async fn create_sprt(
     let origin = Origin {
         tournament: None,
         sprt: Some(id),
+        created_by,
     };
     queue_match(&mut *tx, a, b, p.rallies, p.seed, false, origin).await?;
     tx.commit().await?;
@@ -904,6 +915,7 @@ async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<(
     let origin = Origin {
         tournament: None,
         sprt: Some(id),
+        created_by: s.created_by,
     };
     let seed = (s.seed as u64).wrapping_add(n as u64) & (i64::MAX as u64);
     queue_match(

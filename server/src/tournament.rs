@@ -264,6 +264,7 @@ mod tests {
             error: None,
             tournament_id: Some(1),
             sprt_id: None,
+            created_by: None,
         }
     }
 

@@ -10,7 +10,10 @@ use axum::Json;
 use serde::Deserialize;
 use serde_json::{json, Value};
 
-use super::{agent_or_404, charge, check_token, parse_id, seed_or_clock, ApiError, ApiResult};
+use super::{
+    agent_or_404, charge, check_token, may_cancel, parse_id, seed_or_clock, submitter, ApiError,
+    ApiResult,
+};
 use crate::tournament::{self, Kind};
 use crate::{db, ratings, AppState};
 
@@ -29,13 +32,6 @@ fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {
             .ok()
             .filter(|l| (1..=1000).contains(l))
             .ok_or_else(|| ApiError::bad("limit", "limit must be an integer from 1 to 1000")),
-    }
-}
-
-fn submitter(caller: super::Caller) -> Option<i64> {
-    match caller {
-        super::Caller::Admin => None,
-        super::Caller::Submitter(id) => Some(id),
     }
 }
 
@@ -196,11 +192,12 @@ pub(super) async fn cancel_tournament(
     headers: HeaderMap,
     Path(id): Path<String>,
 ) -> ApiResult<Json<Value>> {
-    check_token(&s, &headers).await?;
+    let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
-    db::tournament(&s.pool, id)
+    let t = db::tournament(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("tournament", id))?;
+    may_cancel(caller, t.created_by, &format!("tournament {id}"))?;
     if db::cancel_tournament(&s.pool, id).await? == 0 {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
@@ -371,11 +368,12 @@ pub(super) async fn cancel_sprt(
     headers: HeaderMap,
     Path(id): Path<String>,
 ) -> ApiResult<Json<Value>> {
-    check_token(&s, &headers).await?;
+    let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
     let t = db::sprt(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("SPRT", id))?;
+    may_cancel(caller, t.created_by, &format!("SPRT {id}"))?;
     if !db::cancel_sprt(&s.pool, id).await? {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
