@@ -807,6 +807,22 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             400,
         ),
         (
+            "tournament naming an agent by id and by name",
+            "POST",
+            "/api/v1/tournaments",
+            authed.to_vec(),
+            br#"{"kind":"round_robin","agents":[1,"scripted"],"rallies_per_match":2}"#.to_vec(),
+            400,
+        ),
+        (
+            "match against an unknown name",
+            "POST",
+            "/api/v1/matches",
+            authed.to_vec(),
+            br#"{"a":"scripted","b":"nobody","rallies":2}"#.to_vec(),
+            404,
+        ),
+        (
             "tournament with an unknown agent",
             "POST",
             "/api/v1/tournaments",
@@ -1105,7 +1121,7 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         "POST",
         "/api/v1/tournaments",
         Some(
-            &json!({"kind": "round_robin", "agents": [1, 2, 3], "rallies_per_match": 3, "rounds": 2, "seed": 40}),
+            &json!({"kind": "round_robin", "agents": ["scripted", 2, "scripted-soft"], "rallies_per_match": 3, "rounds": 2, "seed": 40}),
         ),
         Some(&token),
     );

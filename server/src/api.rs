@@ -420,8 +420,8 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct QueueMatch {
-    a: i64,
-    b: i64,
+    a: AgentRef,
+    b: AgentRef,
     rallies: u32,
     seed: Option<u64>,
 }
@@ -498,11 +498,32 @@ fn may_cancel(caller: Caller, owner: Option<i64>, what: &str) -> ApiResult<()> {
     }
 }
 
-/// The agent with id `id`, or 404 naming `field`.
-async fn agent_or_404(s: &AppState, id: i64, field: &'static str) -> ApiResult<db::Agent> {
-    db::agent(&s.pool, id).await?.ok_or_else(|| ApiError {
+/// An agent in a request: its id or its name.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Deserialize)]
+#[serde(untagged)]
+pub(crate) enum AgentRef {
+    /// By id.
+    Id(i64),
+    /// By name.
+    Name(String),
+}
+
+/// The agent `r` names, or 404 naming `field`.
+async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiResult<db::Agent> {
+    let found = match r {
+        AgentRef::Id(id) => db::agent(&s.pool, *id).await?,
+        AgentRef::Name(name) => db::agent_by_name(&s.pool, name).await?,
+    };
+    found.ok_or_else(|| ApiError {
         field: Some(field),
-        ..ApiError::not_found("agent", id)
+        ..match r {
+            AgentRef::Id(id) => ApiError::not_found("agent", *id),
+            AgentRef::Name(name) => ApiError::new(
+                StatusCode::NOT_FOUND,
+                "not_found",
+                format!("no agent named '{name}'"),
+            ),
+        }
     })
 }
 
@@ -536,8 +557,8 @@ async fn queue_match(
         ));
     }
     let seed = seed_or_clock(q.seed)?;
-    let a = agent_or_404(&s, q.a, "a").await?;
-    let b = agent_or_404(&s, q.b, "b").await?;
+    let a = agent_or_404(&s, &q.a, "a").await?;
+    let b = agent_or_404(&s, &q.b, "b").await?;
     charge(&s, caller, 1)?;
     let origin = db::Origin {
         created_by: submitter(caller),

@@ -109,6 +109,16 @@ pub async fn agent(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Agent>> {
         .await
 }
 
+/// The agent with a name.
+pub async fn agent_by_name(pool: &SqlitePool, name: &str) -> sqlx::Result<Option<Agent>> {
+    sqlx::query_as(&format!(
+        "SELECT {AGENT_COLUMNS} FROM agents WHERE name = ?"
+    ))
+    .bind(name)
+    .fetch_optional(pool)
+    .await
+}
+
 /// An agent's kind and spec (for playing it).
 pub async fn agent_spec(
     pool: &SqlitePool,

@@ -11,8 +11,8 @@ use serde::Deserialize;
 use serde_json::{json, Value};
 
 use super::{
-    agent_or_404, charge, check_token, may_cancel, parse_id, seed_or_clock, submitter, ApiError,
-    ApiResult,
+    agent_or_404, charge, check_token, may_cancel, parse_id, seed_or_clock, submitter, AgentRef,
+    ApiError, ApiResult,
 };
 use crate::tournament::{self, Kind};
 use crate::{db, ratings, AppState};
@@ -39,7 +39,7 @@ fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {
 #[serde(deny_unknown_fields)]
 pub(super) struct NewTournament {
     kind: String,
-    agents: Vec<i64>,
+    agents: Vec<AgentRef>,
     rallies_per_match: u32,
     #[serde(default = "one")]
     rounds: u32,
@@ -61,13 +61,6 @@ pub(super) async fn create_tournament(
         .ok_or_else(|| ApiError::bad("kind", "kind must be round_robin or gauntlet"))?;
     if t.agents.len() < 2 || t.agents.len() > 64 {
         return Err(ApiError::bad("agents", "a tournament needs 2 to 64 agents"));
-    }
-    let mut seen = std::collections::HashSet::new();
-    if let Some(dup) = t.agents.iter().find(|a| !seen.insert(**a)) {
-        return Err(ApiError::bad(
-            "agents",
-            format!("agent {dup} is listed twice"),
-        ));
     }
     if t.rallies_per_match == 0 || t.rallies_per_match > s.settings.max_rallies {
         return Err(ApiError::bad(
@@ -94,8 +87,16 @@ pub(super) async fn create_tournament(
     }
     let seed = seed_or_clock(t.seed)?;
     let mut agents = Vec::with_capacity(t.agents.len());
-    for &id in &t.agents {
-        agents.push(agent_or_404(&s, id, "agents").await?);
+    for r in &t.agents {
+        agents.push(agent_or_404(&s, r, "agents").await?);
+    }
+    // Names and ids may both be given: the same agent twice is caught once resolved.
+    let mut resolved = std::collections::HashSet::new();
+    if let Some(dup) = agents.iter().find(|a| !resolved.insert(a.id)) {
+        return Err(ApiError::bad(
+            "agents",
+            format!("agent '{}' is listed twice", dup.name),
+        ));
     }
     charge(&s, caller, pairs.len() as u32)?;
     let plan = db::TournamentPlan {
@@ -211,8 +212,8 @@ pub(super) async fn cancel_tournament(
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct NewSprt {
-    a: i64,
-    b: i64,
+    a: AgentRef,
+    b: AgentRef,
     #[serde(default)]
     elo0: f64,
     #[serde(default = "default_elo1")]
@@ -283,8 +284,11 @@ pub(super) async fn create_sprt(
         ));
     }
     let seed = seed_or_clock(t.seed)?;
-    let a = agent_or_404(&s, t.a, "a").await?;
-    let b = agent_or_404(&s, t.b, "b").await?;
+    let a = agent_or_404(&s, &t.a, "a").await?;
+    let b = agent_or_404(&s, &t.b, "b").await?;
+    if a.id == b.id {
+        return Err(ApiError::bad("b", "an SPRT needs two different agents"));
+    }
     charge(&s, caller, 1)?;
     let params = db::SprtParams {
         elo0: t.elo0,
