@@ -412,6 +412,9 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     let (code, page) = raw(a, "GET", "/", &[], b"");
     assert_eq!(code, 200);
     assert!(String::from_utf8_lossy(&page).contains("<table id=\"board\">"));
+    let (code, viewer) = raw(a, "GET", "/replay?match=1&rally=0", &[], b"");
+    assert_eq!(code, 200);
+    assert!(String::from_utf8_lossy(&viewer).contains("<canvas id=\"top\""));
     let (code, doc) = call(a, "GET", "/api/v1/openapi.json", None, None);
     assert_eq!((code, doc["openapi"].as_str()), (200, Some("3.0.3")));
 }

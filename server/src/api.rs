@@ -159,6 +159,7 @@ pub fn router(state: AppState) -> Router {
         });
     Router::new()
         .route("/", get(|| async { Html(crate::page::INDEX) }))
+        .route("/replay", get(|| async { Html(crate::page::REPLAY) }))
         .nest("/api/v1", api)
         .layer(DefaultBodyLimit::max(state.settings.max_body_bytes))
         .layer(tower_http::compression::CompressionLayer::new())

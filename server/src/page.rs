@@ -4,6 +4,9 @@
 /// `GET /`: the leaderboard and the latest matches, refreshed every 5 s.
 pub const INDEX: &str = include_str!("index.html");
 
+/// `GET /replay?match=ID&rally=K`: a stored rally drawn from above and from the side, played back.
+pub const REPLAY: &str = include_str!("replay.html");
+
 /// `GET /api/v1/openapi.json`.
 pub const OPENAPI: &str = include_str!("openapi.json");
 
@@ -21,8 +24,8 @@ mod tests {
             .filter_map(|rest| rest.split('"').nth(1))
             .collect();
         assert!(routes.len() >= 14, "{routes:?}");
-        // `/` is the HTML page, outside the API.
-        for p in routes.into_iter().filter(|p| *p != "/") {
+        // `/` and `/replay` are HTML pages, outside the API.
+        for p in routes.into_iter().filter(|p| !["/", "/replay"].contains(p)) {
             assert!(paths.contains_key(p), "{p} is not documented");
         }
     }
