@@ -1466,7 +1466,8 @@ fn batch_submits_a_plan_follows_it_and_writes_csv() {
     std::fs::write(
         &plan,
         "rallies = 3\nseed = 5\n[[match]]\na = \"scripted\"\nb = 2\nrepeat = 2\n\
-         [[tournament]]\nkind = \"gauntlet\"\nagents = [\"scripted-soft\", \"scripted\", \"scripted-drive\"]\nrallies_per_match = 2\n",
+         [[tournament]]\nkind = \"gauntlet\"\nagents = [\"scripted-soft\", \"scripted\", \"scripted-drive\"]\nrallies_per_match = 2\n\
+         [[sprt]]\na = \"scripted\"\nb = \"scripted-soft\"\nrallies_per_match = 2\nmax_matches = 3\nseed = 50\n",
     )
     .unwrap();
     let csv = dir.join("out.csv");
@@ -1493,10 +1494,20 @@ fn batch_submits_a_plan_follows_it_and_writes_csv() {
     );
     let text = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = text.lines().collect();
+    let (_, sprt) = call(&srv.addr, "GET", "/api/v1/sprt/1", None, None);
+    let sprt_matches = sprt["matches"].as_array().unwrap().len();
+    assert!(
+        sprt["status"] != "running" && (2..=3).contains(&sprt_matches),
+        "{sprt}"
+    );
+    assert!(
+        stdout.contains("sprt 1: scripted vs scripted-soft"),
+        "{stdout}"
+    );
     assert_eq!(
         lines.len(),
-        1 + 2 + 2,
-        "header, two matches, a gauntlet of two: {text}"
+        1 + 2 + 2 + sprt_matches,
+        "header, two matches, a gauntlet of two, the SPRT's: {text}"
     );
     let header: Vec<&str> = lines[0].split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();

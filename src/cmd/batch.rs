@@ -1,4 +1,4 @@
-//! `rally batch PLAN.toml --server URL --token T`: submits the matches and tournaments of a plan to a
+//! `rally batch PLAN.toml --server URL --token T`: submits the matches, tournaments and SPRTs of a plan to a
 //! running server, follows them with progress bars, prints a summary table and writes every match
 //! to CSV. Everything in the plan is checked (agent names resolved on the server) before the first
 //! submission, so a bad plan submits nothing.
@@ -18,7 +18,7 @@ use super::CliError;
 /// Arguments of `rally batch`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "PLAN.toml lists [[match]] and [[tournament]] entries; agents are names or ids:\n\n\
+    after_help = "PLAN.toml lists [[match]], [[tournament]] and [[sprt]] entries; agents are names or ids:\n\n\
   rallies = 20                # default rallies per match\n\
   seed = 1                    # first seed: entry k without a seed gets seed + k\n\n\
   [[match]]\n\
@@ -30,6 +30,11 @@ use super::CliError;
   agents = [\"scripted\", \"scripted-drive\", \"scripted-soft\"]\n\
   rallies_per_match = 10\n\
   rounds = 2\n\n\
+  [[sprt]]                    # plays until the test decides; fields as POST /sprt\n\
+  a = \"scripted-drive\"\n\
+  b = \"scripted\"\n\
+  elo0 = 0\n\
+  elo1 = 50\n\n\
 The token may also come from RALLY_TOKEN. Exit status: 0 when every match finished, 1 when one\n\
 failed or was cancelled or the server refused a submission, 2 for a bad plan or arguments.\n\
 See examples/batch_plan.toml."
@@ -84,6 +89,22 @@ struct Plan {
     matches: Vec<PlanMatch>,
     #[serde(default, rename = "tournament")]
     tournaments: Vec<PlanTournament>,
+    #[serde(default, rename = "sprt")]
+    sprts: Vec<PlanSprt>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlanSprt {
+    a: AgentRef,
+    b: AgentRef,
+    elo0: Option<f64>,
+    elo1: Option<f64>,
+    alpha: Option<f64>,
+    beta: Option<f64>,
+    rallies_per_match: Option<u32>,
+    max_matches: Option<u32>,
+    seed: Option<u64>,
 }
 
 fn default_rallies() -> u32 {
@@ -237,6 +258,10 @@ enum Job {
         body: Value,
         label: String,
     },
+    Sprt {
+        body: Value,
+        label: String,
+    },
 }
 
 /// Turns the plan into requests, resolving agent names against the server's agents; a usage error
@@ -301,8 +326,42 @@ fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<Vec<J
         });
         k += 1;
     }
+    for (i, t) in plan.sprts.iter().enumerate() {
+        let at = format!("sprt {}", i + 1);
+        let (a, b) = (resolve(&t.a, &at)?, resolve(&t.b, &at)?);
+        if a == b {
+            return Err(format!("{at}: an SPRT needs two different agents"));
+        }
+        let mut body = json!({"a": a, "b": b,
+            "seed": t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64),
+            "rallies_per_match": t.rallies_per_match.unwrap_or(plan.rallies)});
+        for (key, v) in [
+            ("elo0", t.elo0),
+            ("elo1", t.elo1),
+            ("alpha", t.alpha),
+            ("beta", t.beta),
+        ] {
+            if let Some(v) = v {
+                body[key] = json!(v);
+            }
+        }
+        if let Some(m) = t.max_matches {
+            body["max_matches"] = json!(m);
+        }
+        let name = |id: i64| {
+            agents
+                .iter()
+                .find(|(_, v)| **v == id)
+                .map_or(format!("#{id}"), |(n, _)| n.clone())
+        };
+        out.push(Job::Sprt {
+            body,
+            label: format!("{} vs {}", name(a), name(b)),
+        });
+        k += 1;
+    }
     if out.is_empty() {
-        return Err("the plan has no [[match]] or [[tournament]] entry".into());
+        return Err("the plan has no [[match]], [[tournament]] or [[sprt]] entry".into());
     }
     Ok(out)
 }
@@ -360,6 +419,7 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     };
     let mut plain: Vec<i64> = Vec::new();
     let mut tournaments: Vec<(i64, String, usize)> = Vec::new();
+    let mut sprts: Vec<(i64, String, usize)> = Vec::new();
     for job in &jobs {
         let submitted = match job {
             Job::Match {
@@ -380,15 +440,20 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
                     tournaments.extend(t["id"].as_i64().map(|id| (id, label.clone(), total)));
                 })
             }
+            Job::Sprt { body, label } => client.post_patiently("/sprt", body, &say).map(|t| {
+                let most = t["max_matches"].as_u64().unwrap_or(0) as usize;
+                sprts.extend(t["id"].as_i64().map(|id| (id, label.clone(), most)));
+            }),
         };
         if let Err(e) = submitted {
-            let done = if plain.is_empty() && tournaments.is_empty() {
+            let done = if plain.is_empty() && tournaments.is_empty() && sprts.is_empty() {
                 "nothing was submitted".to_string()
             } else {
                 format!(
-                    "already submitted: matches {:?}, tournaments {:?} (DELETE them to cancel)",
+                    "already submitted: matches {:?}, tournaments {:?}, SPRTs {:?} (DELETE them to cancel)",
                     plain,
-                    tournaments.iter().map(|t| t.0).collect::<Vec<_>>()
+                    tournaments.iter().map(|t| t.0).collect::<Vec<_>>(),
+                    sprts.iter().map(|t| t.0).collect::<Vec<_>>()
                 )
             };
             return Err(CliError::Failed(
@@ -396,26 +461,31 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
             ));
         }
     }
+    let ids = |v: &[(i64, String, usize)]| {
+        v.iter()
+            .map(|t| t.0.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     eprintln!(
-        "submitted {} matches{}",
+        "submitted {} matches{}{}",
         plain.len(),
         if tournaments.is_empty() {
             String::new()
         } else {
-            format!(
-                " and tournaments {}",
-                tournaments
-                    .iter()
-                    .map(|t| t.0.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
+            format!(", tournaments {}", ids(&tournaments))
+        },
+        if sprts.is_empty() {
+            String::new()
+        } else {
+            format!(", SPRTs {}", ids(&sprts))
         }
     );
     if args.no_wait {
         println!(
             "{}",
-            json!({"matches": plain, "tournaments": tournaments.iter().map(|t| t.0).collect::<Vec<_>>()})
+            json!({"matches": plain, "tournaments": tournaments.iter().map(|t| t.0).collect::<Vec<_>>(),
+                   "sprts": sprts.iter().map(|t| t.0).collect::<Vec<_>>()})
         );
         return Ok(());
     }
@@ -442,6 +512,16 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     let started = Instant::now();
     let mut rows: HashMap<i64, Value> = HashMap::new();
     let mut views: Vec<Value> = vec![Value::Null; tournaments.len()];
+    let s_bars: Vec<ProgressBar> = sprts
+        .iter()
+        .map(|(id, label, most)| {
+            let b = bars.add(ProgressBar::new(*most as u64));
+            b.set_style(style.clone());
+            b.set_prefix(format!("sprt {id}: {label}"));
+            b
+        })
+        .collect();
+    let mut sprt_views: Vec<Value> = vec![Value::Null; sprts.len()];
     loop {
         for &id in &plain {
             if rows
@@ -484,6 +564,24 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
             all_done &= p["state"] == "finished";
             views[k] = v;
         }
+        for (k, (id, _, _)) in sprts.iter().enumerate() {
+            if sprt_views[k]["status"]
+                .as_str()
+                .is_some_and(|s| s != "running")
+            {
+                continue;
+            }
+            let v = client.call("GET", &format!("/sprt/{id}"), None)?;
+            s_bars[k].set_position(v["matches_done"].as_u64().unwrap_or(0));
+            s_bars[k].set_message(format!(
+                "LLR {:+.2} in [{:.2}, {:.2}]",
+                v["llr"].as_f64().unwrap_or(0.0),
+                v["bounds"]["lower"].as_f64().unwrap_or(0.0),
+                v["bounds"]["upper"].as_f64().unwrap_or(0.0)
+            ));
+            all_done &= v["status"] != "running";
+            sprt_views[k] = v;
+        }
         if all_done {
             break;
         }
@@ -496,11 +594,11 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
         }
         std::thread::sleep(Duration::from_secs_f64(args.poll));
     }
-    for b in t_bars.iter().chain(plain_bar.iter()) {
+    for b in t_bars.iter().chain(s_bars.iter()).chain(plain_bar.iter()) {
         b.finish();
     }
-    // Full rows of the tournaments' matches, for the CSV and the summary.
-    for v in &views {
+    // Full rows of the tournaments' and SPRTs' matches, for the CSV and the summary.
+    for v in views.iter().chain(&sprt_views) {
         for m in v["matches"].as_array().into_iter().flatten() {
             if let Some(id) = m["id"].as_i64() {
                 let full = client.call("GET", &format!("/matches/{id}"), None)?;
@@ -509,7 +607,7 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
         }
     }
     let mut order: Vec<i64> = plain.clone();
-    for v in &views {
+    for v in views.iter().chain(&sprt_views) {
         order.extend(
             v["matches"]
                 .as_array()
@@ -528,7 +626,34 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     for (v, (id, label, _)) in views.iter().zip(&tournaments) {
         print_standings(*id, label, v);
     }
+    for (v, (id, label, _)) in sprt_views.iter().zip(&sprts) {
+        println!();
+        println!(
+            "sprt {id}: {label}, H0 {} / H1 {} Elo: {} after {} matches, LLR {:+.3} in [{:.3}, {:.3}], Elo estimate {}",
+            v["elo0"],
+            v["elo1"],
+            v["status"].as_str().unwrap_or("?"),
+            v["matches_done"],
+            v["llr"].as_f64().unwrap_or(0.0),
+            v["bounds"]["lower"].as_f64().unwrap_or(0.0),
+            v["bounds"]["upper"].as_f64().unwrap_or(0.0),
+            v["elo_estimate"]
+                .as_f64()
+                .map_or("–".into(), |e| format!("{e:+.1}"))
+        );
+    }
     println!("wrote {} ({} matches)", csv_path.display(), order.len());
+    let broken: Vec<String> = sprt_views
+        .iter()
+        .zip(&sprts)
+        .filter_map(|(v, (id, _, _))| {
+            let s = v["status"].as_str()?;
+            matches!(s, "failed" | "cancelled").then(|| format!("SPRT {id} {s}"))
+        })
+        .collect();
+    if !broken.is_empty() {
+        return Err(CliError::Failed(anyhow!("{}", broken.join(", "))));
+    }
     let bad: Vec<String> = order
         .iter()
         .filter_map(|id| {
