@@ -61,6 +61,10 @@ impl ApiError {
         }
     }
 
+    fn not_cancellable(message: String) -> ApiError {
+        ApiError::new(StatusCode::CONFLICT, "not_cancellable", message)
+    }
+
     fn not_found(what: &str, id: i64) -> ApiError {
         ApiError::new(
             StatusCode::NOT_FOUND,
@@ -646,11 +650,10 @@ async fn cancel_match(
         .ok_or_else(|| ApiError::not_found("match", id))?;
     may_cancel(caller, m.created_by, &format!("match {id}"))?;
     if !db::cancel(&s.pool, id).await? {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
-            "not_cancellable",
-            format!("match {id} is {} and can no longer be cancelled", m.status),
-        ));
+        return Err(ApiError::not_cancellable(format!(
+            "match {id} is {} and can no longer be cancelled",
+            m.status
+        )));
     }
     Ok(Json(json!(db::match_row(&s.pool, id).await?)))
 }

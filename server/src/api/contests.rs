@@ -200,11 +200,9 @@ pub(super) async fn cancel_tournament(
         .ok_or_else(|| ApiError::not_found("tournament", id))?;
     may_cancel(caller, t.created_by, &format!("tournament {id}"))?;
     if db::cancel_tournament(&s.pool, id).await? == 0 {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
-            "not_cancellable",
-            format!("tournament {id} has no queued or running match left"),
-        ));
+        return Err(ApiError::not_cancellable(format!(
+            "tournament {id} has no queued or running match left"
+        )));
     }
     Ok(Json(tournament_view(&s, id).await?))
 }
@@ -379,11 +377,10 @@ pub(super) async fn cancel_sprt(
         .ok_or_else(|| ApiError::not_found("SPRT", id))?;
     may_cancel(caller, t.created_by, &format!("SPRT {id}"))?;
     if !db::cancel_sprt(&s.pool, id).await? {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
-            "not_cancellable",
-            format!("SPRT {id} has ended ({})", t.status),
-        ));
+        return Err(ApiError::not_cancellable(format!(
+            "SPRT {id} has ended ({})",
+            t.status
+        )));
     }
     Ok(Json(sprt_view(&s, id).await?))
 }
