@@ -1072,7 +1072,11 @@ fn multipart(boundary: &str, fields: &[(&str, &str)], file: (&str, &str, &[u8]))
 #[test]
 fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     let dir = tempdir("contests");
-    let srv = start_with(&dir, false, "max_matches_per_minute = 8\n");
+    let srv = start_with(
+        &dir,
+        false,
+        "max_matches_per_minute = 8\nmax_agents_per_hour = 1\n",
+    );
     let a = srv.addr.as_str();
     let (code, t) = call(
         a,
@@ -1117,6 +1121,21 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     assert_eq!(code, 201, "{v}");
     assert_eq!(v["agent"]["name"], "uploaded");
     assert_eq!(v["qualification"]["episodes"], 6);
+    // One agent an hour for this token: a second valid one is refused, before any qualification.
+    let (code, e) = call(
+        a,
+        "POST",
+        "/api/v1/agents",
+        Some(&json!({"name": "second", "checkpoint": template("second")})),
+        Some(&token),
+    );
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (429, Some("rate_limited")),
+        "{e}"
+    );
+    let (_, listed) = call(a, "GET", "/api/v1/agents", None, None);
+    assert_eq!(listed["agents"].as_array().unwrap().len(), 4, "{listed}");
 
     // A round robin of the three built-ins, two rounds: 6 matches, charged to the token (6 of 8).
     let (code, t) = call(

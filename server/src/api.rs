@@ -14,7 +14,7 @@ use axum::{Json, Router};
 use serde::Deserialize;
 use serde_json::{json, Value};
 
-use crate::{db, ratings, AppState};
+use crate::{db, ratings, AppState, Budget};
 
 mod contests;
 use contests::{
@@ -373,6 +373,7 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
                 e.to_string(),
             )
         })?;
+    charge(&s, caller, Budget::Agents, 1)?;
     let spec = agents::player::PlayerSpec::Checkpoint(Arc::new(checkpoint));
     let eval = agents::eval::Evaluation {
         model: s.model.clone(),
@@ -382,6 +383,12 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
         episodes: s.settings.qualification_episodes,
         seed: 0,
     };
+    // One qualification at a time (each one already uses every core).
+    let _turn = s
+        .qualify
+        .acquire()
+        .await
+        .map_err(|e| anyhow::anyhow!("qualification queue closed: {e}"))?;
     let report = tokio::task::spawn_blocking(move || agents::eval::evaluate(&eval, &spec, &|| {}))
         .await
         .map_err(|e| anyhow::anyhow!("qualification panicked: {e}"))?
@@ -431,13 +438,27 @@ struct QueueMatch {
     seed: Option<u64>,
 }
 
-/// Refuses a submitter token that would queue more than `max_matches_per_minute` matches within a
-/// minute with 429 and `Retry-After`; otherwise books the `n` matches. The admin is not limited.
-fn charge(s: &AppState, caller: Caller, n: u32) -> ApiResult<()> {
+/// Refuses a submitter token that would go over a budget — `max_matches_per_minute` matches queued
+/// or `max_agents_per_hour` agents submitted — with 429 and `Retry-After`; otherwise books `n`.
+/// The admin is not limited.
+fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()> {
     let Caller::Submitter(token) = caller else {
         return Ok(());
     };
-    let limit = s.settings.max_matches_per_minute;
+    let (limit, window, what, per) = match budget {
+        Budget::Matches => (
+            s.settings.max_matches_per_minute,
+            60,
+            "queue matches",
+            "minute",
+        ),
+        Budget::Agents => (
+            s.settings.max_agents_per_hour,
+            3600,
+            "submit agents",
+            "hour",
+        ),
+    };
     let limited = |message: String, secs: u64| ApiError {
         retry_after: Some(secs),
         field: Some("rate"),
@@ -445,34 +466,34 @@ fn charge(s: &AppState, caller: Caller, n: u32) -> ApiResult<()> {
     };
     if n > limit {
         return Err(limited(
-            format!("this request queues {n} matches; a token may queue at most {limit} a minute"),
-            60,
+            format!("this request would {what} {n} times; a token may do so at most {limit} times an {per}"),
+            window,
         ));
     }
     let now = std::time::Instant::now();
-    let window = std::time::Duration::from_secs(60);
+    let window_d = std::time::Duration::from_secs(window);
     let mut log = s.rate.lock().unwrap_or_else(|e| e.into_inner());
-    let mine = log.entry(token).or_default();
+    let mine = log.entry((token, budget)).or_default();
     while mine
         .front()
-        .is_some_and(|(t, _)| now.duration_since(*t) >= window)
+        .is_some_and(|(t, _)| now.duration_since(*t) >= window_d)
     {
         mine.pop_front();
     }
     let used: u32 = mine.iter().map(|x| x.1).sum();
     if used + n > limit {
-        // When enough of the window's matches will have expired.
+        // When enough of the window's spending will have expired.
         let mut freed = 0;
-        let mut wait = 60;
+        let mut wait = window;
         for (t, k) in mine.iter() {
             freed += k;
             if used - freed + n <= limit {
-                wait = (window - now.duration_since(*t)).as_secs() + 1;
+                wait = (window_d - now.duration_since(*t)).as_secs() + 1;
                 break;
             }
         }
         return Err(limited(
-            format!("this token queued {used} matches in the last minute (limit {limit}); retry in {wait} s"),
+            format!("this token used {used} of its {limit} per {per} ({what}); retry in {wait} s"),
             wait,
         ));
     }
@@ -564,7 +585,7 @@ async fn queue_match(
     let seed = seed_or_clock(q.seed)?;
     let a = agent_or_404(&s, &q.a, "a").await?;
     let b = agent_or_404(&s, &q.b, "b").await?;
-    charge(&s, caller, 1)?;
+    charge(&s, caller, Budget::Matches, 1)?;
     let origin = db::Origin {
         created_by: submitter(caller),
         ..db::Origin::default()

@@ -62,6 +62,14 @@ pub struct Settings {
     /// Most matches one tournament may queue.
     #[serde(default = "default_tournament_matches")]
     pub max_tournament_matches: u32,
+    /// Agents a submitter token may submit per hour (each one is qualified on
+    /// `qualification_episodes` episodes); the admin token is not limited.
+    #[serde(default = "default_agents_per_hour")]
+    pub max_agents_per_hour: u32,
+}
+
+fn default_agents_per_hour() -> u32 {
+    30
 }
 
 fn default_matches_per_minute() -> u32 {
@@ -87,6 +95,9 @@ impl Settings {
         }
         if s.max_matches_per_minute == 0 {
             return Err("max_matches_per_minute must be positive".into());
+        }
+        if s.max_agents_per_hour == 0 {
+            return Err("max_agents_per_hour must be positive".into());
         }
         if s.max_tournament_matches == 0 {
             return Err("max_tournament_matches must be positive".into());
@@ -116,13 +127,24 @@ pub struct AppState {
     pub wake: Arc<Notify>,
     /// The last leaderboard computed, with the number of finished matches it was computed from.
     pub board: Arc<tokio::sync::Mutex<Option<CachedBoard>>>,
-    /// Matches each submitter token queued in the last minute (when, how many).
+    /// What each submitter token spent of its budgets recently (when, how much).
     pub rate: Arc<std::sync::Mutex<RateLog>>,
+    /// One qualification at a time: submissions wait their turn instead of piling up on the CPU.
+    pub qualify: Arc<tokio::sync::Semaphore>,
 }
 
-/// Per submitter token id, the (time, matches) of its recent requests.
+/// The budgets a submitter token spends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Budget {
+    /// Matches queued, per minute.
+    Matches,
+    /// Agents submitted, per hour.
+    Agents,
+}
+
+/// Per (submitter token id, budget), the (time, amount) of its recent requests.
 pub type RateLog =
-    std::collections::HashMap<i64, std::collections::VecDeque<(std::time::Instant, u32)>>;
+    std::collections::HashMap<(i64, Budget), std::collections::VecDeque<(std::time::Instant, u32)>>;
 
 /// Opens the database, applies the migrations, re-queues matches a previous process left running,
 /// registers the built-in agents, starts the workers and serves until SIGINT/SIGTERM.
@@ -169,6 +191,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         wake: Arc::new(Notify::new()),
         board: Arc::new(tokio::sync::Mutex::new(None)),
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
+        qualify: Arc::new(tokio::sync::Semaphore::new(1)),
     };
     db::register_builtins(&state.pool).await?;
     Ok(state)

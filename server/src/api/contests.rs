@@ -15,7 +15,7 @@ use super::{
     ApiError, ApiResult,
 };
 use crate::tournament::{self, Kind};
-use crate::{db, ratings, AppState};
+use crate::{db, ratings, AppState, Budget};
 
 /// `?limit=` (1–1000, default 100); any other parameter is refused.
 fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {
@@ -98,7 +98,7 @@ pub(super) async fn create_tournament(
             format!("agent '{}' is listed twice", dup.name),
         ));
     }
-    charge(&s, caller, pairs.len() as u32)?;
+    charge(&s, caller, Budget::Matches, pairs.len() as u32)?;
     let plan = db::TournamentPlan {
         kind: kind.name(),
         agents: &agents,
@@ -287,7 +287,7 @@ pub(super) async fn create_sprt(
     if a.id == b.id {
         return Err(ApiError::bad("b", "an SPRT needs two different agents"));
     }
-    charge(&s, caller, 1)?;
+    charge(&s, caller, Budget::Matches, 1)?;
     let params = db::SprtParams {
         elo0: t.elo0,
         elo1: t.elo1,
