@@ -304,7 +304,7 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         None,
         None,
     );
-    assert_eq!(code, 200);
+    assert_eq!((code, rep["resimulated"].as_bool()), (200, Some(false)));
     assert!(rep["frames"].as_array().unwrap().len() > 10);
     let (code, gz) = raw(
         a,
@@ -436,7 +436,8 @@ fn continuous_mode_fills_the_leaderboard() {
                     .all(|r| r["matches"].as_u64().unwrap() > 0),
                 "{board}"
             );
-            // Continuous-mode matches keep no replay, and say how to re-simulate one.
+            // Continuous-mode matches keep no frames: the replay is re-simulated, and equals the
+            // frames `rally match` writes for the same agents and seed.
             let (_, list) = call(
                 &srv.addr,
                 "GET",
@@ -444,22 +445,51 @@ fn continuous_mode_fills_the_leaderboard() {
                 None,
                 None,
             );
-            let id = list["matches"][0]["id"].as_i64().unwrap();
-            let (code, e) = call(
+            let m = &list["matches"][0];
+            let id = m["id"].as_i64().unwrap();
+            assert_eq!(m["keep_replay"], false, "{m}");
+            let (code, r) = call(
                 &srv.addr,
                 "GET",
-                &format!("/api/v1/matches/{id}/replay"),
+                &format!("/api/v1/matches/{id}/replay?rally=1"),
                 None,
                 None,
             );
-            assert_eq!(code, 404);
-            assert_eq!(e["error"]["code"], "no_replay");
+            assert_eq!((code, r["resimulated"].as_bool()), (200, Some(true)), "{r}");
+            let name = |agent: &Value| {
+                let (_, a) = call(
+                    &srv.addr,
+                    "GET",
+                    &format!("/api/v1/agents/{agent}"),
+                    None,
+                    None,
+                );
+                a["name"].as_str().unwrap().to_string()
+            };
+            let file = dir.join("cli-replay.json");
+            let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+                .args(["match", &name(&m["agent_a"]), &name(&m["agent_b"])])
+                .args([
+                    "--rallies",
+                    &m["rallies"].to_string(),
+                    "--seed",
+                    &m["seed"].to_string(),
+                ])
+                .arg("--replay")
+                .arg(&file)
+                .output()
+                .unwrap();
             assert!(
-                e["error"]["message"]
-                    .as_str()
-                    .unwrap()
-                    .contains("rally match scripted"),
-                "{e}"
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let cli: Value =
+                serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+            assert!(!r["frames"].as_array().unwrap().is_empty());
+            assert_eq!(
+                r["frames"], cli["rallies"][1],
+                "server re-simulation vs rally match --replay"
             );
             break;
         }

@@ -283,72 +283,18 @@ pub fn play_match_with(
     progress: &mut dyn FnMut(u32),
 ) -> Result<(MatchRecord, Replay), String> {
     let mut rally = Rally::new(spec.model.clone(), &spec.config, spec.preset)?;
-    let nu = spec.model.actuators.len();
-    let mut ctrl = vec![0.0; nu];
     let mut records = Vec::new();
     let mut replay: Replay = Vec::new();
     let mut points = [0u32; 2];
     for k in 0..spec.rallies {
-        let server = if k % 2 == 0 { Side::A } else { Side::B };
-        let (serve_seed, agent_seed) = episode_seeds(spec.seed, k as usize);
-        rally.reset(server, &mut Rng::seeded(serve_seed), None);
-        let t0 = rally.arena.world.time;
-        for (i, p) in players.iter_mut().enumerate() {
-            p.reset();
-            p.reseed(agent_seed.wrapping_add(i as u64));
-        }
-        let mut frames = Vec::new();
-        let every = (1.0 / (sim::arena::CONTROL_DT * REPLAY_HZ as f64))
-            .round()
-            .max(1.0) as usize;
-        let mut step = 0usize;
-        loop {
-            if spec.replay && step.is_multiple_of(every) {
-                frames.push(frame(&rally, t0));
-            }
-            let mut invalid = None;
-            for (i, side) in [Side::A, Side::B].into_iter().enumerate() {
-                let robot = &rally.arena.robots[i];
-                ctrl.copy_from_slice(&robot.state.ctrl);
-                let ball = rally.arena.world.ball;
-                let ok = players[i]
-                    .act(robot, &ball, rally.arena.world.time, &mut ctrl)
-                    .is_ok()
-                    && ctrl.iter().all(|c| c.is_finite());
-                if ok {
-                    rally.arena.robots[i].state.ctrl.copy_from_slice(&ctrl);
-                } else if invalid.is_none() {
-                    invalid = Some(side);
-                }
-            }
-            if let Some(side) = invalid {
-                rally.invalid_action(side);
-                break;
-            }
-            step += 1;
-            if rally.step().done {
-                break;
-            }
-        }
-        if spec.replay {
-            frames.push(frame(&rally, t0));
-        }
-        let end = rally.referee.end().expect("a finished rally has an end");
-        if let Some(loser) = end.failing_side {
+        let (record, frames, loser) = play_rally(&mut rally, &mut players, spec, k);
+        if let Some(loser) = loser {
             points[match loser {
                 Side::A => 1,
                 Side::B => 0,
             }] += 1;
         }
-        records.push(RallyRecord {
-            index: k,
-            server: server.name(),
-            length: rally.referee.rally_length(),
-            end: end.reason.name(),
-            failing_side: end.failing_side.map(Side::name),
-            duration: rally.arena.world.time - t0,
-            crossings: rally.crossings.iter().map(CrossingRecord::from).collect(),
-        });
+        records.push(record);
         replay.push(frames);
         progress(k);
     }
@@ -386,6 +332,104 @@ pub fn play_match_with(
         rallies: records,
     };
     Ok((record, replay))
+}
+
+/// Plays rally `k` of a match on `rally` (reset first: every rally starts from the ready pose with its
+/// own serve and agent seeds, so it depends on nothing but the match seed and `k`); its record, its
+/// replay frames (empty unless `spec.replay`) and the side that failed.
+fn play_rally(
+    rally: &mut Rally,
+    players: &mut [Box<dyn Player>; 2],
+    spec: &MatchSpec,
+    k: u32,
+) -> (RallyRecord, Vec<Frame>, Option<Side>) {
+    let mut ctrl = vec![0.0; spec.model.actuators.len()];
+    let server = if k.is_multiple_of(2) {
+        Side::A
+    } else {
+        Side::B
+    };
+    let (serve_seed, agent_seed) = episode_seeds(spec.seed, k as usize);
+    rally.reset(server, &mut Rng::seeded(serve_seed), None);
+    let t0 = rally.arena.world.time;
+    for (i, p) in players.iter_mut().enumerate() {
+        p.reset();
+        p.reseed(agent_seed.wrapping_add(i as u64));
+    }
+    let mut frames = Vec::new();
+    let every = (1.0 / (sim::arena::CONTROL_DT * REPLAY_HZ as f64))
+        .round()
+        .max(1.0) as usize;
+    let mut step = 0usize;
+    loop {
+        if spec.replay && step.is_multiple_of(every) {
+            frames.push(frame(rally, t0));
+        }
+        let mut invalid = None;
+        for (i, side) in [Side::A, Side::B].into_iter().enumerate() {
+            let robot = &rally.arena.robots[i];
+            ctrl.copy_from_slice(&robot.state.ctrl);
+            let ball = rally.arena.world.ball;
+            let ok = players[i]
+                .act(robot, &ball, rally.arena.world.time, &mut ctrl)
+                .is_ok()
+                && ctrl.iter().all(|c| c.is_finite());
+            if ok {
+                rally.arena.robots[i].state.ctrl.copy_from_slice(&ctrl);
+            } else if invalid.is_none() {
+                invalid = Some(side);
+            }
+        }
+        if let Some(side) = invalid {
+            rally.invalid_action(side);
+            break;
+        }
+        step += 1;
+        if rally.step().done {
+            break;
+        }
+    }
+    if spec.replay {
+        frames.push(frame(rally, t0));
+    }
+    let end = rally.referee.end().expect("a finished rally has an end");
+    let record = RallyRecord {
+        index: k,
+        server: server.name(),
+        length: rally.referee.rally_length(),
+        end: end.reason.name(),
+        failing_side: end.failing_side.map(Side::name),
+        duration: rally.arena.world.time - t0,
+        crossings: rally.crossings.iter().map(CrossingRecord::from).collect(),
+    };
+    (record, frames, end.failing_side)
+}
+
+/// Re-plays rally `k` of the match `spec` describes, alone and with replay frames: the same record
+/// and frames, bit for bit, as rally `k` of [`play_match`] with `spec.replay` set.
+pub fn replay_rally(
+    spec: &MatchSpec,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+    k: u32,
+) -> Result<(RallyRecord, Vec<Frame>), String> {
+    if k >= spec.rallies {
+        return Err(format!(
+            "the match has rallies 0 to {}",
+            spec.rallies.saturating_sub(1)
+        ));
+    }
+    let mut players = [
+        a.build(&spec.model, Side::A, 0)?,
+        b.build(&spec.model, Side::B, 0)?,
+    ];
+    let mut rally = Rally::new(spec.model.clone(), &spec.config, spec.preset)?;
+    let spec = MatchSpec {
+        replay: true,
+        ..spec.clone()
+    };
+    let (record, frames, _) = play_rally(&mut rally, &mut players, &spec, k);
+    Ok((record, frames))
 }
 
 #[cfg(test)]

@@ -109,3 +109,24 @@ fn a_player_producing_nan_loses_with_invalid_action_and_nothing_crashes() {
     }
     assert_eq!(r.points, [2, 0]);
 }
+
+#[test]
+fn any_rally_replays_alone_bit_for_bit() {
+    // Rallies are independent (each from the ready pose, with its own seeds), so the server can
+    // re-simulate one rally of a match that kept no replay frames.
+    let (a, b) = (
+        PlayerSpec::scripted("scripted-drive").unwrap(),
+        PlayerSpec::scripted("scripted").unwrap(),
+    );
+    let s = spec(5, 11, true);
+    let (record, replay) = play_match(&s, &a, &b, &mut |_| {}).unwrap();
+    // Without frames in the match itself, too: the re-simulation turns them on.
+    let quiet = spec(5, 11, false);
+    for k in [4u32, 1, 3] {
+        let (r, frames) = agents::matchrun::replay_rally(&quiet, &a, &b, k).unwrap();
+        assert_eq!(r, record.rallies[k as usize], "rally {k}'s record");
+        assert_eq!(frames, replay[k as usize], "rally {k}'s frames");
+        assert!(!frames.is_empty());
+    }
+    assert!(agents::matchrun::replay_rally(&quiet, &a, &b, 5).is_err());
+}

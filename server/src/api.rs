@@ -703,39 +703,57 @@ async fn get_replay(
             format!("match {id} is {}; replays exist once it is done", m.status),
         ));
     }
-    if !m.keep_replay {
-        let names = (
-            db::agent(&s.pool, m.agent_a).await?,
-            db::agent(&s.pool, m.agent_b).await?,
-        );
-        let (na, nb) = (
-            names.0.map(|a| a.name).unwrap_or_default(),
-            names.1.map(|a| a.name).unwrap_or_default(),
-        );
-        return Err(ApiError::new(
-            StatusCode::NOT_FOUND,
-            "no_replay",
-            format!(
-                "match {id} keeps no replay (continuous-mode and SPRT matches do not); re-simulate it bit for bit with `rally match {na} {nb} --rallies {} --seed {} --replay replay.json`",
-                m.rallies, m.seed
-            ),
-        ));
-    }
     if rally >= m.rallies {
         return Err(ApiError::bad(
             "rally",
             format!("match {id} has rallies 0 to {}", m.rallies - 1),
         ));
     }
-    let frames = db::replay(&s.pool, id, rally).await?.ok_or_else(|| {
-        ApiError::new(
-            StatusCode::NOT_FOUND,
-            "not_found",
-            "no replay stored for that rally",
-        )
-    })?;
+    let (frames, resimulated) = if m.keep_replay {
+        let frames = db::replay(&s.pool, id, rally).await?.ok_or_else(|| {
+            ApiError::new(
+                StatusCode::NOT_FOUND,
+                "not_found",
+                "no replay stored for that rally",
+            )
+        })?;
+        (frames, false)
+    } else {
+        // Continuous-mode and SPRT matches keep no frames: rallies are independent and deterministic,
+        // so the rally is re-simulated (bit-identical to the one played), a few at a time.
+        let spec_of = |agent: i64| {
+            let s = s.clone();
+            async move {
+                db::agent_spec(&s.pool, agent)
+                    .await?
+                    .map(|(kind, spec, _)| (kind, spec))
+                    .ok_or_else(|| {
+                        ApiError::new(
+                            StatusCode::CONFLICT,
+                            "not_replayable",
+                            format!("agent {agent} no longer exists"),
+                        )
+                    })
+            }
+        };
+        let agents = [spec_of(m.agent_a).await?, spec_of(m.agent_b).await?];
+        let _turn = s
+            .resim
+            .acquire()
+            .await
+            .map_err(|e| anyhow::anyhow!("re-simulation queue closed: {e}"))?;
+        let st = s.clone();
+        let frames = tokio::task::spawn_blocking(move || {
+            crate::scheduler::resimulate_rally(&st, &m, agents, rally as u32)
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("re-simulation panicked: {e}"))?
+        .map_err(|e| ApiError::new(StatusCode::CONFLICT, "not_replayable", e))?;
+        let json = serde_json::to_string(&frames).map_err(|e| anyhow::anyhow!("{e}"))?;
+        (json, true)
+    };
     let body = format!(
-        "{{\"match\":{id},\"rally\":{rally},\"hz\":{},\"frames\":{frames}}}",
+        "{{\"match\":{id},\"rally\":{rally},\"hz\":{},\"resimulated\":{resimulated},\"frames\":{frames}}}",
         agents::matchrun::REPLAY_HZ
     );
     Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())

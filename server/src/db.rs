@@ -873,7 +873,7 @@ pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
 /// log-likelihood ratio over its finished matches, ends it when the ratio leaves the bounds or
 /// `max_matches` are played, and otherwise queues the next match (sides swapped every match, the
 /// k-th with seed plus k). One match at a time, so the test's course depends only on its seeds. SPRT
-/// matches keep no replay frames (re-simulate one from its seed).
+/// matches keep no replay frames (the replay endpoint re-simulates a rally on request).
 async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<()> {
     let s: Option<Sprt> = sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
         .bind(id)

@@ -131,6 +131,8 @@ pub struct AppState {
     pub rate: Arc<std::sync::Mutex<RateLog>>,
     /// One qualification at a time: submissions wait their turn instead of piling up on the CPU.
     pub qualify: Arc<tokio::sync::Semaphore>,
+    /// Replays of matches that kept no frames are re-simulated, as many at a time as there are workers.
+    pub resim: Arc<tokio::sync::Semaphore>,
 }
 
 /// The budgets a submitter token spends.
@@ -183,6 +185,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         sim::config::DEFAULT_MODEL_XML,
         "config/models/upper_body.xml",
     )?);
+    let workers = settings.workers;
     let state = AppState {
         pool,
         model,
@@ -192,6 +195,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         board: Arc::new(tokio::sync::Mutex::new(None)),
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
         qualify: Arc::new(tokio::sync::Semaphore::new(1)),
+        resim: Arc::new(tokio::sync::Semaphore::new(workers)),
     };
     db::register_builtins(&state.pool).await?;
     Ok(state)

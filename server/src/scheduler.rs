@@ -8,7 +8,8 @@
 //! Continuous mode: when the queue is empty a worker queues a match for the agent whose rating
 //! interval is widest (no interval counts as widest), against the opponent it has met least, at most
 //! one every `continuous_pause_s` seconds. Continuous-mode matches store no replay frames (about
-//! 50 kB a rally even gzipped); they can be re-simulated bit-identically from their seed.
+//! 50 kB a rally even gzipped); `GET /matches/{id}/replay` re-simulates such a rally on request,
+//! bit-identical to the one played (rallies are independent: `agents::matchrun::replay_rally`).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -33,13 +34,9 @@ pub fn player_spec(state: &AppState, kind: &str, spec: &str) -> Result<PlayerSpe
     }
 }
 
-/// Plays stored match `m` to completion (blocking: call it off the async runtime).
-pub fn play(
-    state: &AppState,
-    m: &db::Match,
-    a: &PlayerSpec,
-    b: &PlayerSpec,
-) -> Result<(agents::matchrun::MatchRecord, agents::matchrun::Replay), String> {
+/// The match runner's recipe for stored match `m`: its preset and simulator version must be this
+/// server's.
+pub fn match_spec(state: &AppState, m: &db::Match) -> Result<MatchSpec, String> {
     let preset = sim::arena::PRESETS
         .iter()
         .find(|p| p.name == m.preset)
@@ -52,15 +49,41 @@ pub fn play(
             sim::SIM_VERSION
         ));
     }
-    let spec = MatchSpec {
+    Ok(MatchSpec {
         model: state.model.clone(),
         config: state.arena.clone(),
         preset,
         rallies: m.rallies as u32,
         seed: m.seed as u64,
         replay: m.keep_replay,
-    };
-    play_match(&spec, a, b, &mut |_| {})
+    })
+}
+
+/// Plays stored match `m` to completion (blocking: call it off the async runtime).
+pub fn play(
+    state: &AppState,
+    m: &db::Match,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+) -> Result<(agents::matchrun::MatchRecord, agents::matchrun::Replay), String> {
+    play_match(&match_spec(state, m)?, a, b, &mut |_| {})
+}
+
+/// Re-simulates rally `k` of finished match `m` with replay frames (blocking), after checking that
+/// both agents are still the ones it was played with.
+pub fn resimulate_rally(
+    state: &AppState,
+    m: &db::Match,
+    agents: [(String, String); 2],
+    k: u32,
+) -> Result<Vec<agents::matchrun::Frame>, String> {
+    let [(ka, sa), (kb, sb)] = agents;
+    if db::spec_hash(&sa) != m.spec_hash_a || db::spec_hash(&sb) != m.spec_hash_b {
+        return Err("an agent's spec changed since the match was played".into());
+    }
+    let a = player_spec(state, &ka, &sa)?;
+    let b = player_spec(state, &kb, &sb)?;
+    agents::matchrun::replay_rally(&match_spec(state, m)?, &a, &b, k).map(|(_, frames)| frames)
 }
 
 async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
