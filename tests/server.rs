@@ -666,6 +666,14 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             400,
         ),
         (
+            "bad page cursor",
+            "GET",
+            "/api/v1/matches?before=abc",
+            vec![],
+            vec![],
+            400,
+        ),
+        (
             "bad limit",
             "GET",
             "/api/v1/matches?limit=0",
@@ -1240,6 +1248,24 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     );
     let (_, ts) = call(a, "GET", "/api/v1/tournaments", None, None);
     assert_eq!(ts["tournaments"].as_array().unwrap().len(), 1);
+    // Paging through the matches with `before`: every one once, newest first.
+    let mut seen = vec![];
+    let mut path = "/api/v1/matches?limit=4".to_string();
+    loop {
+        let (_, page) = call(a, "GET", &path, None, None);
+        seen.extend(
+            page["matches"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|m| m["id"].as_i64().unwrap()),
+        );
+        match page["next_before"].as_i64() {
+            Some(b) => path = format!("/api/v1/matches?limit=4&before={b}"),
+            None => break,
+        }
+    }
+    assert_eq!(seen, (1..=9).rev().collect::<Vec<i64>>());
 
     // The tournament finishes; its cross-table and standings agree with its matches.
     let t = poll(

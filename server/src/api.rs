@@ -606,14 +606,15 @@ async fn list_matches(
     Query(q): Query<HashMap<String, String>>,
 ) -> ApiResult<Json<Value>> {
     for k in q.keys() {
-        if !["agent", "status", "limit"].contains(&k.as_str()) {
+        if !["agent", "status", "limit", "before"].contains(&k.as_str()) {
             return Err(ApiError::bad(
                 "query",
-                format!("unknown query parameter '{k}' (agent, status, limit)"),
+                format!("unknown query parameter '{k}' (agent, status, limit, before)"),
             ));
         }
     }
     let agent = q.get("agent").map(|a| parse_id(a, "agent")).transpose()?;
+    let before = q.get("before").map(|b| parse_id(b, "before")).transpose()?;
     let status = q.get("status").map(String::as_str);
     if let Some(st) = status {
         if !["queued", "running", "done", "failed", "cancelled"].contains(&st) {
@@ -631,9 +632,17 @@ async fn list_matches(
             .filter(|l| (1..=1000).contains(l))
             .ok_or_else(|| ApiError::bad("limit", "limit must be an integer from 1 to 1000"))?,
     };
-    Ok(Json(
-        json!({ "matches": db::matches(&s.pool, agent, status, limit).await? }),
-    ))
+    let filter = db::MatchFilter {
+        agent,
+        status,
+        before,
+    };
+    let page = db::matches(&s.pool, filter, limit).await?;
+    // A full page may have more behind it: `?before=` this id gets the next one.
+    let next = (page.len() as i64 == limit)
+        .then(|| page.last().map(|m| m.id))
+        .flatten();
+    Ok(Json(json!({ "matches": page, "next_before": next })))
 }
 
 async fn get_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Json<Value>> {

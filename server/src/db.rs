@@ -260,18 +260,29 @@ pub async fn match_row(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Match>
         .await
 }
 
-/// Matches, newest first, optionally of one agent and/or in one status.
+/// Which matches to list.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MatchFilter<'a> {
+    /// Only those this agent played.
+    pub agent: Option<i64>,
+    /// Only those in this status.
+    pub status: Option<&'a str>,
+    /// Only those with a smaller id (the next page after the last id seen).
+    pub before: Option<i64>,
+}
+
+/// Matches, newest first, filtered.
 pub async fn matches(
     pool: &SqlitePool,
-    agent: Option<i64>,
-    status: Option<&str>,
+    filter: MatchFilter<'_>,
     limit: i64,
 ) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {MATCH_COLUMNS} FROM matches WHERE (?1 IS NULL OR agent_a = ?1 OR agent_b = ?1) AND (?2 IS NULL OR status = ?2) ORDER BY id DESC LIMIT ?3"
+        "SELECT {MATCH_COLUMNS} FROM matches WHERE (?1 IS NULL OR agent_a = ?1 OR agent_b = ?1) AND (?2 IS NULL OR status = ?2) AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4"
     ))
-    .bind(agent)
-    .bind(status)
+    .bind(filter.agent)
+    .bind(filter.status)
+    .bind(filter.before)
     .bind(limit)
     .fetch_all(pool)
     .await

@@ -156,7 +156,15 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
 
 /// Queues one continuous-mode match if the queue is empty; true if it did.
 async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
-    let queued = db::matches(&state.pool, None, Some("queued"), 1).await?;
+    let queued = db::matches(
+        &state.pool,
+        db::MatchFilter {
+            status: Some("queued"),
+            ..db::MatchFilter::default()
+        },
+        1,
+    )
+    .await?;
     if !queued.is_empty() {
         return Ok(false);
     }
