@@ -445,17 +445,22 @@ fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()>
     let Caller::Submitter(token) = caller else {
         return Ok(());
     };
-    let (limit, window, what, per) = match budget {
+    // (limit, window in seconds, verb, its past tense, noun, the window in words)
+    let (limit, window, verb, done, noun, per) = match budget {
         Budget::Matches => (
             s.settings.max_matches_per_minute,
             60,
-            "queue matches",
+            "queue",
+            "queued",
+            "matches",
             "minute",
         ),
         Budget::Agents => (
             s.settings.max_agents_per_hour,
             3600,
-            "submit agents",
+            "submit",
+            "submitted",
+            "agents",
             "hour",
         ),
     };
@@ -466,7 +471,7 @@ fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()>
     };
     if n > limit {
         return Err(limited(
-            format!("this request would {what} {n} times; a token may do so at most {limit} times an {per}"),
+            format!("this request would {verb} {n} {noun}; a token may {verb} at most {limit} per {per}"),
             window,
         ));
     }
@@ -493,7 +498,7 @@ fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()>
             }
         }
         return Err(limited(
-            format!("this token used {used} of its {limit} per {per} ({what}); retry in {wait} s"),
+            format!("this token {done} {used} {noun} in the last {per} (limit {limit}); retry in {wait} s"),
             wait,
         ));
     }
