@@ -29,4 +29,71 @@ mod tests {
             assert!(paths.contains_key(p), "{p} is not documented");
         }
     }
+
+    /// The document's schemas name exactly the fields the API serialises.
+    #[test]
+    fn the_schemas_match_the_rows() {
+        let v: serde_json::Value = serde_json::from_str(super::OPENAPI).expect("valid JSON");
+        let keys = |schema: &str| {
+            let mut k: Vec<String> = v["components"]["schemas"][schema]["properties"]
+                .as_object()
+                .expect("properties")
+                .keys()
+                .cloned()
+                .collect();
+            k.sort();
+            k
+        };
+        let fields = |row: serde_json::Value| {
+            let mut k: Vec<String> = row
+                .as_object()
+                .expect("an object")
+                .keys()
+                .cloned()
+                .collect();
+            k.sort();
+            k
+        };
+        let m = crate::db::Match {
+            id: 1,
+            agent_a: 1,
+            agent_b: 2,
+            rallies: 1,
+            seed: 0,
+            preset: String::new(),
+            sim_version: String::new(),
+            spec_hash_a: String::new(),
+            spec_hash_b: String::new(),
+            keep_replay: true,
+            status: String::new(),
+            created_at: String::new(),
+            started_at: None,
+            finished_at: None,
+            points_a: None,
+            points_b: None,
+            mean_rally_length: None,
+            max_rally_length: None,
+            in_box_fraction: None,
+            energy_distance: None,
+            drift_slope: None,
+            error: None,
+            tournament_id: None,
+            sprt_id: None,
+            created_by: None,
+        };
+        assert_eq!(keys("Match"), fields(serde_json::to_value(m).unwrap()));
+        let a = crate::db::Agent {
+            id: 1,
+            name: String::new(),
+            kind: String::new(),
+            spec_hash: String::new(),
+            builtin: true,
+            created_at: String::new(),
+            qual_episodes: None,
+            hit_rate: None,
+            success_rate: None,
+            effort: None,
+        };
+        assert_eq!(keys("Agent"), fields(serde_json::to_value(a).unwrap()));
+    }
 }
