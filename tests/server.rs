@@ -415,6 +415,9 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     let (code, viewer) = raw(a, "GET", "/replay?match=1&rally=0", &[], b"");
     assert_eq!(code, 200);
     assert!(String::from_utf8_lossy(&viewer).contains("<canvas id=\"top\""));
+    let (code, agent_page) = raw(a, "GET", "/agent?id=1", &[], b"");
+    assert_eq!(code, 200);
+    assert!(String::from_utf8_lossy(&agent_page).contains("<svg id=\"cloud\""));
     let (code, doc) = call(a, "GET", "/api/v1/openapi.json", None, None);
     assert_eq!((code, doc["openapi"].as_str()), (200, Some("3.0.3")));
 }
@@ -1353,6 +1356,17 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         "{agent}"
     );
     assert!(agent["drift"]["crossings"].as_u64().unwrap() > 0, "{agent}");
+    // The crossings behind it (SQL over the crossings table) are the same set the match runner's
+    // per-side statistics counted.
+    let (_, cx) = call(a, "GET", "/api/v1/agents/1/crossings", None, None);
+    assert_eq!(cx["total"], agent["drift"]["crossings"], "{cx}");
+    let list = cx["crossings"].as_array().unwrap();
+    assert_eq!(list.len() as u64, cx["total"].as_u64().unwrap());
+    let in_box = list.iter().filter(|c| c["in_box"] == true).count() as f64 / list.len() as f64;
+    assert!((in_box - agent["drift"]["in_box_fraction"].as_f64().unwrap()).abs() < 1e-9);
+    assert!(list.iter().any(|c| c["exchange"] == 0));
+    let (code, _) = call(a, "GET", "/api/v1/agents/1/crossings?limit=0", None, None);
+    assert_eq!(code, 400);
     let (_, metrics) = call(a, "GET", "/api/v1/metrics", None, None);
     assert!(
         metrics.as_str().unwrap().contains("rally_tournaments 1"),

@@ -18,8 +18,8 @@ use crate::{db, ratings, AppState, Budget};
 
 mod contests;
 use contests::{
-    cancel_sprt, cancel_tournament, create_sprt, create_tournament, get_rating_history, get_sprt,
-    get_tournament, list_sprts, list_tournaments,
+    cancel_sprt, cancel_tournament, create_sprt, create_tournament, get_agent_crossings,
+    get_rating_history, get_sprt, get_tournament, list_sprts, list_tournaments,
 };
 
 /// A rejected request.
@@ -137,6 +137,7 @@ pub fn router(state: AppState) -> Router {
         .route("/agents", get(list_agents).post(submit_agent))
         .route("/agents/{id}", get(get_agent))
         .route("/agents/{id}/ratings", get(get_rating_history))
+        .route("/agents/{id}/crossings", get(get_agent_crossings))
         .route("/matches", get(list_matches).post(queue_match))
         .route("/matches/{id}", get(get_match).delete(cancel_match))
         .route("/matches/{id}/replay", get(get_replay))
@@ -164,6 +165,7 @@ pub fn router(state: AppState) -> Router {
     Router::new()
         .route("/", get(|| async { Html(crate::page::INDEX) }))
         .route("/replay", get(|| async { Html(crate::page::REPLAY) }))
+        .route("/agent", get(|| async { Html(crate::page::AGENT) }))
         .nest("/api/v1", api)
         .layer(DefaultBodyLimit::max(state.settings.max_body_bytes))
         .layer(tower_http::compression::CompressionLayer::new())

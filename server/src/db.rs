@@ -580,6 +580,52 @@ pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<
     .await
 }
 
+/// A crossing of the hitting plane that an agent is answerable for.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct AgentCrossing {
+    /// The match.
+    pub match_id: i64,
+    /// The rally in it.
+    pub rally: i64,
+    /// 0 for a serve, k for the k-th return of the rally.
+    pub exchange: i64,
+    /// Lateral coordinate in the receiver's frame, m.
+    pub y_r: f64,
+    /// Height, m.
+    pub z: f64,
+    /// Inside the serve box.
+    pub in_box: bool,
+    /// Extrapolated (the receiver hit before the plane).
+    pub extrapolated: bool,
+}
+
+/// The crossings an agent is answerable for in its finished matches, newest match first: every
+/// serve of those rallies and the crossings its own returns produced (the same set as its side's
+/// drift statistics); at most `limit`, with the total.
+pub async fn agent_crossings(
+    pool: &SqlitePool,
+    agent: i64,
+    limit: i64,
+) -> sqlx::Result<(i64, Vec<AgentCrossing>)> {
+    const MINE: &str = "FROM crossings c JOIN matches m ON m.id = c.match_id \
+        WHERE m.status = 'done' AND ((m.agent_a = ?1 AND (c.exchange = 0 OR c.receiver = 'b')) \
+        OR (m.agent_b = ?1 AND (c.exchange = 0 OR c.receiver = 'a')))";
+    let (total,): (i64,) = sqlx::query_as(&format!("SELECT COUNT(*) {MINE}"))
+        .bind(agent)
+        .fetch_one(pool)
+        .await?;
+    let rows = sqlx::query_as(&format!(
+        "SELECT c.match_id AS match_id, c.rally_idx AS rally, c.exchange AS exchange, c.y_r AS y_r, c.z AS z, \
+         c.in_box AS in_box, c.extrapolated AS extrapolated {MINE} \
+         ORDER BY c.match_id DESC, c.rally_idx, c.seq LIMIT ?2"
+    ))
+    .bind(agent)
+    .bind(limit)
+    .fetch_all(pool)
+    .await?;
+    Ok((total, rows))
+}
+
 /// One point of an agent's rating history.
 #[derive(Debug, Clone, Serialize, FromRow)]
 pub struct RatingPoint {

@@ -7,6 +7,10 @@ pub const INDEX: &str = include_str!("index.html");
 /// `GET /replay?match=ID&rally=K`: a stored rally drawn from above and from the side, played back.
 pub const REPLAY: &str = include_str!("replay.html");
 
+/// `GET /agent?id=N`: one agent — where its returns cross the hitting plane, its rating history, its
+/// latest matches.
+pub const AGENT: &str = include_str!("agent.html");
+
 /// `GET /api/v1/openapi.json`.
 pub const OPENAPI: &str = include_str!("openapi.json");
 
@@ -24,8 +28,11 @@ mod tests {
             .filter_map(|rest| rest.split('"').nth(1))
             .collect();
         assert!(routes.len() >= 14, "{routes:?}");
-        // `/` and `/replay` are HTML pages, outside the API.
-        for p in routes.into_iter().filter(|p| !["/", "/replay"].contains(p)) {
+        // `/`, `/replay` and `/agent` are HTML pages, outside the API.
+        for p in routes
+            .into_iter()
+            .filter(|p| !["/", "/replay", "/agent"].contains(p))
+        {
             assert!(paths.contains_key(p), "{p} is not documented");
         }
     }

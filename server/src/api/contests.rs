@@ -398,3 +398,40 @@ pub(super) async fn get_rating_history(
         json!({"agent_id": id, "agent": a.name, "system": "glicko2", "history": history}),
     ))
 }
+
+pub(super) async fn get_agent_crossings(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    Query(q): Query<HashMap<String, String>>,
+) -> ApiResult<Json<Value>> {
+    let id = parse_id(&id, "id")?;
+    if let Some(k) = q.keys().find(|k| k.as_str() != "limit") {
+        return Err(ApiError::bad(
+            "query",
+            format!("unknown query parameter '{k}' (limit)"),
+        ));
+    }
+    let limit = match q.get("limit") {
+        None => 2000,
+        Some(l) => l
+            .parse::<i64>()
+            .ok()
+            .filter(|l| (1..=20_000).contains(l))
+            .ok_or_else(|| ApiError::bad("limit", "limit must be an integer from 1 to 20000"))?,
+    };
+    let a = db::agent(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("agent", id))?;
+    let (total, crossings) = db::agent_crossings(&s.pool, id, limit).await?;
+    Ok(Json(json!({
+        "agent_id": id,
+        "agent": a.name,
+        "serve_box": {
+            "half_width": sim::arena::SERVE_BOX_HALF_WIDTH,
+            "z_low": sim::arena::SERVE_BOX_Z.0,
+            "z_high": sim::arena::SERVE_BOX_Z.1,
+        },
+        "total": total,
+        "crossings": crossings,
+    })))
+}
