@@ -549,6 +549,62 @@ fn kill_9_in_the_middle_of_a_match_loses_nothing() {
     );
 }
 
+#[test]
+fn kill_9_during_an_sprt_neither_loses_nor_forks_it() {
+    let dir = tempdir("sprt-restart");
+    let mut srv = start(&dir, false);
+    let (code, p) = call(
+        &srv.addr,
+        "POST",
+        "/api/v1/sprt",
+        Some(
+            &json!({"a": 1, "b": 2, "rallies_per_match": 40, "max_matches": 4, "elo1": 400, "seed": 20}),
+        ),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 202, "{p}");
+    let pid = p["id"].as_i64().unwrap();
+    // Kill it while its second match is being played.
+    let t0 = Instant::now();
+    loop {
+        let (_, v) = call(&srv.addr, "GET", &format!("/api/v1/sprt/{pid}"), None, None);
+        let ms = v["matches"].as_array().unwrap();
+        if ms.len() == 2 && ms[1]["status"] == "running" {
+            break;
+        }
+        assert!(v["status"] == "running", "ended before the kill: {v}");
+        assert!(t0.elapsed() < Duration::from_secs(60), "{v}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    srv.child.kill().unwrap();
+    srv.child.wait().unwrap();
+    drop(srv);
+    let srv = start(&dir, false);
+    let p = poll(
+        &srv.addr,
+        &format!("/api/v1/sprt/{pid}"),
+        Duration::from_secs(120),
+        |v| v["status"] != "running",
+    );
+    // One match per step, seeds 20, 21, … in order, sides alternating, all done: as if never killed.
+    let ms = p["matches"].as_array().unwrap();
+    assert_eq!(ms.len() as i64, p["matches_done"].as_i64().unwrap(), "{p}");
+    for (k, m) in ms.iter().enumerate() {
+        assert_eq!(m["status"], "done", "{p}");
+        assert_eq!(m["seed"].as_i64().unwrap(), 20 + k as i64);
+        assert_eq!(
+            m["agent_a"].as_i64().unwrap(),
+            if k % 2 == 0 { 1 } else { 2 }
+        );
+    }
+    let (_, all) = call(&srv.addr, "GET", "/api/v1/matches", None, None);
+    assert_eq!(
+        all["matches"].as_array().unwrap().len(),
+        ms.len(),
+        "no stray match"
+    );
+}
+
 /// What, method, path, headers, body, expected status.
 type Case<'a> = (
     &'a str,
