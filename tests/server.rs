@@ -370,13 +370,7 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     assert_eq!(list["matches"].as_array().unwrap().len(), 1);
 
     // Cancelling: a finished match cannot be; a queued or running one can, and stays cancelled.
-    let (code, e) = call(
-        a,
-        "DELETE",
-        &format!("/api/v1/matches/{id}"),
-        None,
-        Some(TOKEN),
-    );
+    let (code, e) = delete(a, &format!("/api/v1/matches/{id}"), Some(TOKEN));
     assert_eq!(
         (code, e["error"]["code"].as_str()),
         (409, Some("not_cancellable"))
@@ -389,13 +383,7 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         Some(TOKEN),
     );
     let lid = long["id"].as_i64().unwrap();
-    let (code, c) = call(
-        a,
-        "DELETE",
-        &format!("/api/v1/matches/{lid}"),
-        None,
-        Some(TOKEN),
-    );
+    let (code, c) = delete(a, &format!("/api/v1/matches/{lid}"), Some(TOKEN));
     assert_eq!(
         (code, c["status"].as_str()),
         (200, Some("cancelled")),
@@ -1131,6 +1119,11 @@ fn sigterm_shuts_down_gracefully_and_loses_nothing() {
     assert_eq!(done["rally_log"].as_array().unwrap().len(), 40);
 }
 
+/// A DELETE with a bearer token (or none).
+fn delete(addr: &str, path: &str, token: Option<&str>) -> (u16, Value) {
+    call(addr, "DELETE", path, None, token)
+}
+
 /// Polls `path` until `done(value)` holds.
 fn poll(addr: &str, path: &str, limit: Duration, done: impl Fn(&Value) -> bool) -> Value {
     let t0 = Instant::now();
@@ -1513,13 +1506,7 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         other => panic!("SPRT ended {other}: {p}"),
     }
     // An ended SPRT cannot be cancelled; a running one can, and its queued match with it.
-    let (code, _) = call(
-        a,
-        "DELETE",
-        &format!("/api/v1/sprt/{pid}"),
-        None,
-        Some(TOKEN),
-    );
+    let (code, _) = delete(a, &format!("/api/v1/sprt/{pid}"), Some(TOKEN));
     assert_eq!(code, 409);
     let (code, p2) = call(
         a,
@@ -1531,45 +1518,21 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     assert_eq!(code, 202, "{p2}");
     let pid2 = p2["id"].as_i64().unwrap();
     // A submitter cannot cancel what it did not queue; the admin can cancel anything.
-    let (code, e) = call(
-        a,
-        "DELETE",
-        &format!("/api/v1/sprt/{pid2}"),
-        None,
-        Some(&token),
-    );
+    let (code, e) = delete(a, &format!("/api/v1/sprt/{pid2}"), Some(&token));
     assert_eq!(
         (code, e["error"]["code"].as_str()),
         (403, Some("not_owner")),
         "{e}"
     );
-    let (code, e) = call(
-        a,
-        "DELETE",
-        &format!("/api/v1/tournaments/{tid}"),
-        None,
-        Some(&other),
-    );
+    let (code, e) = delete(a, &format!("/api/v1/tournaments/{tid}"), Some(&other));
     assert_eq!(code, 403, "{e}");
-    let (code, e) = call(
-        a,
-        "DELETE",
-        &format!("/api/v1/tournaments/{tid}"),
-        None,
-        Some(&token),
-    );
+    let (code, e) = delete(a, &format!("/api/v1/tournaments/{tid}"), Some(&token));
     assert_eq!(
         (code, e["error"]["code"].as_str()),
         (409, Some("not_cancellable")),
         "{e}"
     );
-    let (code, c) = call(
-        a,
-        "DELETE",
-        &format!("/api/v1/sprt/{pid2}"),
-        None,
-        Some(TOKEN),
-    );
+    let (code, c) = delete(a, &format!("/api/v1/sprt/{pid2}"), Some(TOKEN));
     assert_eq!(
         (code, c["status"].as_str()),
         (200, Some("cancelled")),

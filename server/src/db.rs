@@ -211,6 +211,40 @@ pub struct Match {
 
 const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by";
 
+#[cfg(test)]
+impl Match {
+    /// A queued match row for tests (nothing played, no tournament or SPRT).
+    pub(crate) fn example(id: i64, agent_a: i64, agent_b: i64) -> Match {
+        Match {
+            id,
+            agent_a,
+            agent_b,
+            rallies: 10,
+            seed: id,
+            preset: "myochallenge".into(),
+            sim_version: String::new(),
+            spec_hash_a: String::new(),
+            spec_hash_b: String::new(),
+            keep_replay: true,
+            status: "queued".into(),
+            created_at: String::new(),
+            started_at: None,
+            finished_at: None,
+            points_a: None,
+            points_b: None,
+            mean_rally_length: None,
+            max_rally_length: None,
+            in_box_fraction: None,
+            energy_distance: None,
+            drift_slope: None,
+            error: None,
+            tournament_id: None,
+            sprt_id: None,
+            created_by: None,
+        }
+    }
+}
+
 /// What queued a match, besides a plain request.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Origin {

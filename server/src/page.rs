@@ -61,33 +61,7 @@ mod tests {
             k.sort();
             k
         };
-        let m = crate::db::Match {
-            id: 1,
-            agent_a: 1,
-            agent_b: 2,
-            rallies: 1,
-            seed: 0,
-            preset: String::new(),
-            sim_version: String::new(),
-            spec_hash_a: String::new(),
-            spec_hash_b: String::new(),
-            keep_replay: true,
-            status: String::new(),
-            created_at: String::new(),
-            started_at: None,
-            finished_at: None,
-            points_a: None,
-            points_b: None,
-            mean_rally_length: None,
-            max_rally_length: None,
-            in_box_fraction: None,
-            energy_distance: None,
-            drift_slope: None,
-            error: None,
-            tournament_id: None,
-            sprt_id: None,
-            created_by: None,
-        };
+        let m = crate::db::Match::example(1, 1, 2);
         assert_eq!(keys("Match"), fields(serde_json::to_value(m).unwrap()));
         let a = crate::db::Agent {
             id: 1,

@@ -240,31 +240,11 @@ mod tests {
 
     fn m(id: i64, a: i64, b: i64, status: &str, points: Option<(i64, i64)>) -> Match {
         Match {
-            id,
-            agent_a: a,
-            agent_b: b,
-            rallies: 10,
-            seed: id,
-            preset: "myochallenge".into(),
-            sim_version: "x".into(),
-            spec_hash_a: String::new(),
-            spec_hash_b: String::new(),
-            keep_replay: true,
             status: status.into(),
-            created_at: String::new(),
-            started_at: None,
-            finished_at: None,
             points_a: points.map(|p| p.0),
             points_b: points.map(|p| p.1),
-            mean_rally_length: None,
-            max_rally_length: None,
-            in_box_fraction: None,
-            energy_distance: None,
-            drift_slope: None,
-            error: None,
             tournament_id: Some(1),
-            sprt_id: None,
-            created_by: None,
+            ..Match::example(id, a, b)
         }
     }
 
