@@ -130,6 +130,31 @@ fn parse_id(raw: &str, what: &'static str) -> ApiResult<i64> {
         .ok_or_else(|| ApiError::bad(what, format!("'{raw}' is not a positive integer id")))
 }
 
+/// Refuses any query parameter not in `allowed`, naming the allowed ones.
+fn only_params(q: &HashMap<String, String>, allowed: &[&str]) -> ApiResult<()> {
+    match q.keys().find(|k| !allowed.contains(&k.as_str())) {
+        Some(k) => Err(ApiError::bad(
+            "query",
+            format!("unknown query parameter '{k}' ({})", allowed.join(", ")),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// `?limit=`: an integer from 1 to `max`, `default` when absent.
+fn limit_param(q: &HashMap<String, String>, default: i64, max: i64) -> ApiResult<i64> {
+    match q.get("limit") {
+        None => Ok(default),
+        Some(l) => l
+            .parse::<i64>()
+            .ok()
+            .filter(|l| (1..=max).contains(l))
+            .ok_or_else(|| {
+                ApiError::bad("limit", format!("limit must be an integer from 1 to {max}"))
+            }),
+    }
+}
+
 /// The router: API, page, limits, compression.
 pub fn router(state: AppState) -> Router {
     let api = Router::new()
@@ -612,14 +637,7 @@ async fn list_matches(
     State(s): State<AppState>,
     Query(q): Query<HashMap<String, String>>,
 ) -> ApiResult<Json<Value>> {
-    for k in q.keys() {
-        if !["agent", "status", "limit", "before"].contains(&k.as_str()) {
-            return Err(ApiError::bad(
-                "query",
-                format!("unknown query parameter '{k}' (agent, status, limit, before)"),
-            ));
-        }
-    }
+    only_params(&q, &["agent", "status", "limit", "before"])?;
     let agent = q.get("agent").map(|a| parse_id(a, "agent")).transpose()?;
     let before = q.get("before").map(|b| parse_id(b, "before")).transpose()?;
     let status = q.get("status").map(String::as_str);
@@ -631,14 +649,7 @@ async fn list_matches(
             ));
         }
     }
-    let limit = match q.get("limit") {
-        None => 100,
-        Some(l) => l
-            .parse::<i64>()
-            .ok()
-            .filter(|l| (1..=1000).contains(l))
-            .ok_or_else(|| ApiError::bad("limit", "limit must be an integer from 1 to 1000"))?,
-    };
+    let limit = limit_param(&q, 100, 1000)?;
     let filter = db::MatchFilter {
         agent,
         status,
@@ -740,16 +751,13 @@ async fn get_replay(
         let spec_of = |agent: i64| {
             let s = s.clone();
             async move {
-                db::agent_spec(&s.pool, agent)
-                    .await?
-                    .map(|(kind, spec, _)| (kind, spec))
-                    .ok_or_else(|| {
-                        ApiError::new(
-                            StatusCode::CONFLICT,
-                            "not_replayable",
-                            format!("agent {agent} no longer exists"),
-                        )
-                    })
+                db::agent_spec(&s.pool, agent).await?.ok_or_else(|| {
+                    ApiError::new(
+                        StatusCode::CONFLICT,
+                        "not_replayable",
+                        format!("agent {agent} no longer exists"),
+                    )
+                })
             }
         };
         let agents = [spec_of(m.agent_a).await?, spec_of(m.agent_b).await?];

@@ -120,11 +120,8 @@ pub async fn agent_by_name(pool: &SqlitePool, name: &str) -> sqlx::Result<Option
 }
 
 /// An agent's kind and spec (for playing it).
-pub async fn agent_spec(
-    pool: &SqlitePool,
-    id: i64,
-) -> sqlx::Result<Option<(String, String, String)>> {
-    sqlx::query_as("SELECT kind, spec, name FROM agents WHERE id = ?")
+pub async fn agent_spec(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<(String, String)>> {
+    sqlx::query_as("SELECT kind, spec FROM agents WHERE id = ?")
         .bind(id)
         .fetch_optional(pool)
         .await
@@ -979,11 +976,7 @@ async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<(
         .await?;
     let scores: Vec<f64> = done
         .iter()
-        .filter(|d| d.1 + d.2 > 0)
-        .map(|&(a, pa, pb)| {
-            let mine = if a == s.agent_a { pa } else { pb };
-            mine as f64 / (pa + pb) as f64
-        })
+        .filter_map(|&(a, pa, pb)| crate::ratings::share_of(s.agent_a, a, pa, pb))
         .collect();
     let llr = crate::ratings::sprt_llr(&scores, s.rallies_per_match as f64, s.elo0, s.elo1);
     let (lower, upper) = crate::ratings::sprt_bounds(s.alpha, s.beta);

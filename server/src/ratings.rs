@@ -268,6 +268,13 @@ pub fn elo_to_score(elo: f64) -> f64 {
     1.0 / (1.0 + 10f64.powf(-elo / 400.0))
 }
 
+/// The share of a match's points won by `agent`, given who played side A and the points of A and
+/// B; None when no point was decided.
+pub fn share_of(agent: i64, side_a: i64, points_a: i64, points_b: i64) -> Option<f64> {
+    let mine = if side_a == agent { points_a } else { points_b };
+    (points_a + points_b > 0).then(|| mine as f64 / (points_a + points_b) as f64)
+}
+
 /// The SPRT's log-likelihood ratio of H1 (A's Elo advantage on points is `elo1`) against H0 (it is
 /// `elo0`) after matches whose point shares for A are `scores`: the generalised SPRT of fishtest, a
 /// normal model of the per-match share, LLR = N (s1 − s0)(2 x̄ − s0 − s1) / (2 σ²), with σ² the sample

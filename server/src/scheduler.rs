@@ -78,7 +78,7 @@ pub fn resimulate_rally(
     k: u32,
 ) -> Result<Vec<agents::matchrun::Frame>, String> {
     let [(ka, sa), (kb, sb)] = agents;
-    if db::spec_hash(&sa) != m.spec_hash_a || db::spec_hash(&sb) != m.spec_hash_b {
+    if !specs_unchanged(m, &sa, &sb) {
         return Err("an agent's spec changed since the match was played".into());
     }
     let a = player_spec(state, &ka, &sa)?;
@@ -86,19 +86,23 @@ pub fn resimulate_rally(
     agents::matchrun::replay_rally(&match_spec(state, m)?, &a, &b, k).map(|(_, frames)| frames)
 }
 
+/// Whether the agents' specs are still the ones match `m` was queued with.
+fn specs_unchanged(m: &db::Match, spec_a: &str, spec_b: &str) -> bool {
+    db::spec_hash(spec_a) == m.spec_hash_a && db::spec_hash(spec_b) == m.spec_hash_b
+}
+
 async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
     let spec_of = |id: i64| {
         let state = state.clone();
         async move {
-            let row = db::agent_spec(&state.pool, id).await?;
-            let (kind, spec, _) =
-                row.ok_or_else(|| anyhow::anyhow!("agent {id} no longer exists"))?;
-            anyhow::Ok((kind, spec))
+            db::agent_spec(&state.pool, id)
+                .await?
+                .ok_or_else(|| anyhow::anyhow!("agent {id} no longer exists"))
         }
     };
     let (ka, sa) = spec_of(m.agent_a).await?;
     let (kb, sb) = spec_of(m.agent_b).await?;
-    if db::spec_hash(&sa) != m.spec_hash_a || db::spec_hash(&sb) != m.spec_hash_b {
+    if !specs_unchanged(&m, &sa, &sb) {
         db::fail(
             &state.pool,
             m.id,

@@ -493,20 +493,16 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     // Follow: one bar for the plain matches, one per tournament.
     let style = ProgressStyle::with_template("{prefix:<34} {bar:30} {pos}/{len} matches {msg}")
         .expect("valid template");
-    let plain_bar = (!plain.is_empty()).then(|| {
-        let b = bars.add(ProgressBar::new(plain.len() as u64));
+    let bar = |len: usize, prefix: String| {
+        let b = bars.add(ProgressBar::new(len as u64));
         b.set_style(style.clone());
-        b.set_prefix("matches");
+        b.set_prefix(prefix);
         b
-    });
+    };
+    let plain_bar = (!plain.is_empty()).then(|| bar(plain.len(), "matches".into()));
     let t_bars: Vec<ProgressBar> = tournaments
         .iter()
-        .map(|(id, label, total)| {
-            let b = bars.add(ProgressBar::new(*total as u64));
-            b.set_style(style.clone());
-            b.set_prefix(format!("tournament {id}: {label}"));
-            b
-        })
+        .map(|(id, label, total)| bar(*total, format!("tournament {id}: {label}")))
         .collect();
     let finished = |s: &str| matches!(s, "done" | "failed" | "cancelled");
     let started = Instant::now();
@@ -514,12 +510,7 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     let mut views: Vec<Value> = vec![Value::Null; tournaments.len()];
     let s_bars: Vec<ProgressBar> = sprts
         .iter()
-        .map(|(id, label, most)| {
-            let b = bars.add(ProgressBar::new(*most as u64));
-            b.set_style(style.clone());
-            b.set_prefix(format!("sprt {id}: {label}"));
-            b
-        })
+        .map(|(id, label, most)| bar(*most, format!("sprt {id}: {label}")))
         .collect();
     let mut sprt_views: Vec<Value> = vec![Value::Null; sprts.len()];
     loop {

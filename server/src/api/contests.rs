@@ -11,28 +11,16 @@ use serde::Deserialize;
 use serde_json::{json, Value};
 
 use super::{
-    agent_or_404, charge, check_token, may_cancel, parse_id, seed_or_clock, submitter, AgentRef,
-    ApiError, ApiResult,
+    agent_or_404, charge, check_token, limit_param, may_cancel, only_params, parse_id,
+    seed_or_clock, submitter, AgentRef, ApiError, ApiResult,
 };
 use crate::tournament::{self, Kind};
 use crate::{db, ratings, AppState, Budget};
 
 /// `?limit=` (1–1000, default 100); any other parameter is refused.
 fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {
-    if let Some(k) = q.keys().find(|k| k.as_str() != "limit") {
-        return Err(ApiError::bad(
-            "query",
-            format!("unknown query parameter '{k}' (limit)"),
-        ));
-    }
-    match q.get("limit") {
-        None => Ok(100),
-        Some(l) => l
-            .parse::<i64>()
-            .ok()
-            .filter(|l| (1..=1000).contains(l))
-            .ok_or_else(|| ApiError::bad("limit", "limit must be an integer from 1 to 1000")),
-    }
+    only_params(q, &["limit"])?;
+    limit_param(q, 100, 1000)
 }
 
 #[derive(Deserialize)]
@@ -116,7 +104,7 @@ pub(super) async fn create_tournament(
         matches = pairs.len(),
         "tournament queued"
     );
-    let v = tournament_view(&s, id).await?;
+    let v = tournament_view(&s, tournament_or_404(&s, id).await?).await?;
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, format!("/api/v1/tournaments/{id}"))],
@@ -125,11 +113,16 @@ pub(super) async fn create_tournament(
         .into_response())
 }
 
-/// A tournament with its progress, standings, cross-table and matches.
-async fn tournament_view(s: &AppState, id: i64) -> ApiResult<Value> {
-    let t = db::tournament(&s.pool, id)
+/// The tournament with id `id`, or 404.
+async fn tournament_or_404(s: &AppState, id: i64) -> ApiResult<db::Tournament> {
+    db::tournament(&s.pool, id)
         .await?
-        .ok_or_else(|| ApiError::not_found("tournament", id))?;
+        .ok_or_else(|| ApiError::not_found("tournament", id))
+}
+
+/// A tournament with its progress, standings, cross-table and matches.
+async fn tournament_view(s: &AppState, t: db::Tournament) -> ApiResult<Value> {
+    let id = t.id;
     let ids: Vec<i64> = serde_json::from_str(&t.agents_json)
         .map_err(|e| anyhow::anyhow!("tournament {id}: stored agents unreadable: {e}"))?;
     let mut agents = Vec::with_capacity(ids.len());
@@ -171,7 +164,9 @@ pub(super) async fn get_tournament(
     Path(id): Path<String>,
 ) -> ApiResult<Json<Value>> {
     let id = parse_id(&id, "id")?;
-    Ok(Json(tournament_view(&s, id).await?))
+    Ok(Json(
+        tournament_view(&s, tournament_or_404(&s, id).await?).await?,
+    ))
 }
 
 pub(super) async fn list_tournaments(
@@ -181,9 +176,20 @@ pub(super) async fn list_tournaments(
     let limit = limit_only(&q)?;
     let mut out = Vec::new();
     for t in db::tournaments(&s.pool, limit).await? {
-        let v = tournament_view(&s, t.id).await?;
-        out.push(json!({"id": t.id, "kind": t.kind, "agents": v["agents"], "rallies_per_match": t.rallies_per_match,
-                        "rounds": t.rounds, "created_at": t.created_at, "progress": v["progress"]}));
+        let v = tournament_view(&s, t).await?;
+        let summary: serde_json::Map<String, Value> = [
+            "id",
+            "kind",
+            "agents",
+            "rallies_per_match",
+            "rounds",
+            "created_at",
+            "progress",
+        ]
+        .into_iter()
+        .map(|k| (k.to_string(), v[k].clone()))
+        .collect();
+        out.push(Value::Object(summary));
     }
     Ok(Json(json!({ "tournaments": out })))
 }
@@ -195,16 +201,14 @@ pub(super) async fn cancel_tournament(
 ) -> ApiResult<Json<Value>> {
     let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
-    let t = db::tournament(&s.pool, id)
-        .await?
-        .ok_or_else(|| ApiError::not_found("tournament", id))?;
+    let t = tournament_or_404(&s, id).await?;
     may_cancel(caller, t.created_by, &format!("tournament {id}"))?;
     if db::cancel_tournament(&s.pool, id).await? == 0 {
         return Err(ApiError::not_cancellable(format!(
             "tournament {id} has no queued or running match left"
         )));
     }
-    Ok(Json(tournament_view(&s, id).await?))
+    Ok(Json(tournament_view(&s, t).await?))
 }
 
 #[derive(Deserialize)]
@@ -319,10 +323,7 @@ async fn sprt_view(s: &AppState, id: i64) -> ApiResult<Value> {
         .iter()
         .map(|m| {
             let share = match (m.points_a, m.points_b) {
-                (Some(pa), Some(pb)) if pa + pb > 0 => {
-                    let mine = if m.agent_a == t.agent_a { pa } else { pb };
-                    Some(mine as f64 / (pa + pb) as f64)
-                }
+                (Some(pa), Some(pb)) => ratings::share_of(t.agent_a, m.agent_a, pa, pb),
                 _ => None,
             };
             shares.extend(share);
@@ -405,20 +406,8 @@ pub(super) async fn get_agent_crossings(
     Query(q): Query<HashMap<String, String>>,
 ) -> ApiResult<Json<Value>> {
     let id = parse_id(&id, "id")?;
-    if let Some(k) = q.keys().find(|k| k.as_str() != "limit") {
-        return Err(ApiError::bad(
-            "query",
-            format!("unknown query parameter '{k}' (limit)"),
-        ));
-    }
-    let limit = match q.get("limit") {
-        None => 2000,
-        Some(l) => l
-            .parse::<i64>()
-            .ok()
-            .filter(|l| (1..=20_000).contains(l))
-            .ok_or_else(|| ApiError::bad("limit", "limit must be an integer from 1 to 20000"))?,
-    };
+    only_params(&q, &["limit"])?;
+    let limit = limit_param(&q, 2000, 20_000)?;
     let a = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
