@@ -732,11 +732,8 @@ pub struct TournamentPlan<'a> {
     pub created_by: Option<i64>,
 }
 
-/// Creates a tournament and queues all its matches, in one transaction; the id and the match ids.
-pub async fn create_tournament(
-    pool: &SqlitePool,
-    plan: TournamentPlan<'_>,
-) -> sqlx::Result<(i64, Vec<i64>)> {
+/// Creates a tournament and queues all its matches, in one transaction; its id.
+pub async fn create_tournament(pool: &SqlitePool, plan: TournamentPlan<'_>) -> sqlx::Result<i64> {
     let TournamentPlan {
         kind,
         agents,
@@ -758,7 +755,6 @@ pub async fn create_tournament(
         .execute(&mut *tx)
         .await?
         .last_insert_rowid();
-    let mut matches = Vec::with_capacity(pairs.len());
     for (k, &(a, b)) in pairs.iter().enumerate() {
         let origin = Origin {
             tournament: Some(t),
@@ -766,15 +762,13 @@ pub async fn create_tournament(
             created_by,
         };
         let seed = seed.wrapping_add(k as u64) & (i64::MAX as u64);
-        matches.push(
-            queue_match(
-                &mut *tx, &agents[a], &agents[b], rallies, seed, true, origin,
-            )
-            .await?,
-        );
+        queue_match(
+            &mut *tx, &agents[a], &agents[b], rallies, seed, true, origin,
+        )
+        .await?;
     }
     tx.commit().await?;
-    Ok((t, matches))
+    Ok(t)
 }
 
 /// One tournament.

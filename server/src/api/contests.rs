@@ -96,7 +96,7 @@ pub(super) async fn create_tournament(
         seed,
         created_by: submitter(caller),
     };
-    let (id, _) = db::create_tournament(&s.pool, plan).await?;
+    let id = db::create_tournament(&s.pool, plan).await?;
     s.wake.notify_waiters();
     tracing::info!(
         id,
