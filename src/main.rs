@@ -35,8 +35,12 @@ enum Command {
     Model(cmd::model::ModelArgs),
     /// The physics-based planner's racket command for a ball (paper §IV-B), as JSON.
     Plan(cmd::plan::PlanArgs),
+    /// Draw the learning curves of training runs (reward, hit and success rate) as a PNG.
+    Plot(cmd::plot::PlotArgs),
     /// Run the tournament server: REST API, match workers, leaderboard page, SQLite storage.
     Serve(cmd::serve::ServeArgs),
+    /// Train a policy with PPO (Diff-Muscle or a baseline), resumable, with learning curves.
+    Train(cmd::train::TrainArgs),
 }
 
 fn main() -> ExitCode {
@@ -51,6 +55,8 @@ fn main() -> ExitCode {
         Command::Match(args) => cmd::matchcmd::run(&args),
         Command::Plan(args) => cmd::plan::run(&args),
         Command::Serve(args) => cmd::serve::run(&args),
+        Command::Train(args) => cmd::train::run(&args),
+        Command::Plot(args) => cmd::plot::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -16,8 +16,8 @@ use crate::player::{InvalidAction, Player};
 
 /// The format tag every checkpoint carries.
 pub const FORMAT: &str = "muscle-rally-checkpoint";
-/// The newest format version this build reads.
-pub const VERSION: u32 = 1;
+/// The newest format version this build reads (2 added the optional `training` provenance).
+pub const VERSION: u32 = 2;
 /// Largest checkpoint file accepted, bytes.
 pub const MAX_BYTES: usize = 64 << 20;
 /// Most parameters accepted.
@@ -146,6 +146,53 @@ pub struct Checkpoint {
     /// The network as an ONNX model instead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub onnx: Option<OnnxPolicy>,
+    /// How it was trained, if `rally train` made it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training: Option<Training>,
+}
+
+/// A trained checkpoint's provenance: what made it, from what, how long, how well it did in training.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Training {
+    /// The method (`kmac`, `muscle`, `muscle-pd`, `dynsyn`).
+    pub method: String,
+    /// The command line that trained it.
+    pub command: String,
+    /// The training seed.
+    pub seed: u64,
+    /// The git commit of the code that trained it (`unknown` outside a checkout).
+    pub git_commit: String,
+    /// Control steps simulated in training.
+    pub env_steps: u64,
+    /// PPO iterations.
+    pub iterations: u64,
+    /// Training wall time, s.
+    pub wall_seconds: f64,
+    /// Hit rate over the last training episodes.
+    pub hit_rate: f64,
+    /// Success rate over the last training episodes (a training episode ends 3 steps after the
+    /// hit, so its success is the planner's predicted landing).
+    pub success_rate: f64,
+    /// Episodes those rates are over.
+    pub episodes: u64,
+    /// The learning curve, at most a few hundred points.
+    #[serde(default)]
+    pub curve: Vec<TrainingPoint>,
+}
+
+/// One point of a checkpoint's learning curve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainingPoint {
+    /// Control steps simulated so far.
+    pub env_steps: u64,
+    /// Mean training episode reward.
+    pub reward: f64,
+    /// Training hit rate.
+    pub hit_rate: f64,
+    /// Training success rate.
+    pub success_rate: f64,
 }
 
 /// An ONNX network embedded in a checkpoint.
@@ -421,6 +468,7 @@ impl Checkpoint {
             },
             policy: Some(Mlp { layers }),
             onnx: None,
+            training: None,
         }
     }
 }
@@ -486,16 +534,18 @@ pub struct CheckpointPlayer {
 }
 
 impl CheckpointPlayer {
-    /// A player for `checkpoint` (validated against `model`).
+    /// A player for `checkpoint` (validated against `model`) whose planner predicts with `bounce`.
     pub fn new(
         checkpoint: std::sync::Arc<Checkpoint>,
         model: &Model,
+        bounce: sim::predict::BounceModel,
         seed: u64,
     ) -> Result<CheckpointPlayer, CheckpointError> {
         let network = checkpoint.network()?;
         Ok(CheckpointPlayer {
             network,
-            observer: Observer::new(model, checkpoint.observation.blocks.clone(), seed),
+            observer: Observer::new(model, checkpoint.observation.blocks.clone(), seed)
+                .with_bounce(bounce),
             mapper: ActionMapper::new(model, &checkpoint.controller),
             checkpoint,
             obs: Vec::new(),

@@ -88,6 +88,13 @@ impl Observer {
         }
     }
 
+    /// The same observer planning with `bounce` (the arena preset's table bounce; the default is
+    /// the MyoChallenge table's).
+    pub fn with_bounce(mut self, bounce: BounceModel) -> Observer {
+        self.bounce = bounce;
+        self
+    }
+
     /// Observation length.
     pub fn size(&self) -> usize {
         self.blocks.iter().map(|b| b.size(&self.space)).sum()
@@ -172,75 +179,142 @@ impl Observer {
     }
 }
 
-/// Reward weights (paper §IV-B): `r = w_g·r_g + w_c·r_c + w_s·r_s`, plus `w_d` for the dual-rally term.
+/// Reward weights (paper §IV-B; the values are the official code's, DESIGN §11):
+/// `r = w_g·r_g + w_c·r_c + w_s·r_s`, each a sum of named terms, plus `dual` in the rally arena.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RewardWeights {
-    /// Grasp: the paddle stays at its place in the hand.
+    /// Grasp (dense): `exp(−20·d)`, `d` the paddle's distance from its place in the hand (official ×4
+    /// for position and ×4 for orientation; our grip holds both together).
     pub grasp: f64,
-    /// Command tracking: blade pose towards the planned strike (dense), racket velocity at contact
-    /// (sparse).
-    pub command: f64,
-    /// Task: contact, and a predicted legal landing after it (sparse).
-    pub task: f64,
-    /// Dual rally: the return crosses the other hitting plane inside the serve box (sparse).
+    /// Command (dense): `exp(−8·d)`, `d` the blade centre's distance from the planned strike point;
+    /// paid in full from contact on (official ×20).
+    pub position: f64,
+    /// Command (dense): `exp(−2·θ)`, `θ` the angle between the blade normal and the planned one
+    /// (either face); paid in full from contact on (official ×10).
+    pub orientation: f64,
+    /// Command (sparse, at contact): `exp(−|v − v̂|)`, the paddle's velocity against the planned
+    /// racket velocity (paper §IV-B; not in the official code's list: ours).
+    pub velocity: f64,
+    /// Task (sparse, once): the paddle touched the ball (official ×100).
+    pub hit: f64,
+    /// Task (sparse, once): the return is predicted to land on the other half (official ×100).
+    pub landing: f64,
+    /// Task (sparse, once): `exp(−0.5·‖(y_r, z) − (0, 1.225)‖)` of the return's predicted crossing of
+    /// the other hitting plane, against the serve box's centre (official ×100).
+    pub centre: f64,
+    /// Task (sparse, once): that crossing lies inside the serve box (official ×100).
+    pub in_box: f64,
+    /// Task (sparse, once): a return predicted to go into the net or out (official −20).
+    pub fault: f64,
+    /// Dual rally: the learner's return really crossed the other hitting plane inside the serve box.
     pub dual: f64,
 }
 
 impl Default for RewardWeights {
     fn default() -> Self {
         RewardWeights {
-            grasp: 0.1,
-            command: 1.0,
-            task: 10.0,
-            dual: 5.0,
+            grasp: 4.0,
+            position: 20.0,
+            orientation: 10.0,
+            velocity: 20.0,
+            hit: 100.0,
+            landing: 100.0,
+            centre: 100.0,
+            in_box: 100.0,
+            fault: -20.0,
+            dual: 100.0,
         }
     }
 }
 
-/// Length scale of the dense pose term, m.
-pub const POSE_SCALE: f64 = 0.1;
-/// Speed scale of the sparse racket-velocity term, m/s.
-pub const VELOCITY_SCALE: f64 = 1.0;
-/// Distance scale of the grasp term, m.
-pub const GRASP_SCALE: f64 = 0.05;
+/// The serve box's centre height, m (official code: the `(0, 1.225)` the `centre` term aims at).
+pub const SERVE_BOX_CENTRE_Z: f64 = 0.5 * (arena::SERVE_BOX_Z.0 + arena::SERVE_BOX_Z.1);
+/// Control steps after the ball leaves the paddle at which the task terms are judged and a training
+/// episode ends (official code: 3).
+pub const TASK_DELAY_STEPS: usize = 3;
+/// A training episode without contact ends this long after the planned strike time, s (official).
+pub const MISS_GRACE: f64 = 0.05;
 
-/// The reward terms of one control step, before weighting.
+/// The reward terms of one control step, before weighting (each in [0, 1]).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct RewardTerms {
-    /// r_g ∈ [0, 1].
+    /// Paddle in the hand.
     pub grasp: f64,
-    /// r_c ∈ [0, 2]: pose (dense) + velocity at contact (sparse).
-    pub command: f64,
-    /// r_s ∈ {0, 1, 2}: contact, and a predicted legal landing.
-    pub task: f64,
-    /// Dual term ∈ {0, 1}.
+    /// Blade centre at the planned strike point.
+    pub position: f64,
+    /// Blade normal along the planned one.
+    pub orientation: f64,
+    /// Paddle velocity at contact.
+    pub velocity: f64,
+    /// First contact with this ball.
+    pub hit: f64,
+    /// Predicted landing on the other half.
+    pub landing: f64,
+    /// Closeness of the predicted crossing to the serve box's centre.
+    pub centre: f64,
+    /// Predicted crossing inside the serve box.
+    pub in_box: f64,
+    /// Predicted net or out.
+    pub fault: f64,
+    /// Dual rally: a real crossing of the other plane in the box.
     pub dual: f64,
 }
 
 impl RewardTerms {
     /// The weighted sum.
     pub fn total(&self, w: &RewardWeights) -> f64 {
-        w.grasp * self.grasp + w.command * self.command + w.task * self.task + w.dual * self.dual
+        w.grasp * self.grasp
+            + w.position * self.position
+            + w.orientation * self.orientation
+            + w.velocity * self.velocity
+            + w.hit * self.hit
+            + w.landing * self.landing
+            + w.centre * self.centre
+            + w.in_box * self.in_box
+            + w.fault * self.fault
+            + w.dual * self.dual
     }
 }
 
-/// Grasp term: 1 while the paddle is at its place in the hand, falling off with its distance.
-pub fn grasp_term(robot: &Robot, nominal: &V3) -> f64 {
-    let d = (robot.paddle.pose.pos - nominal).norm();
-    (-(d / GRASP_SCALE).powi(2)).exp()
+/// Grasp term: 1 while the paddle is at its place in the hand, `exp(−20·d)` once it slips.
+pub fn grasp_term(robot: &Robot) -> f64 {
+    (-20.0 * robot.paddle_offset()).exp()
 }
 
-/// Dense pose term: how close the blade centre is to the planned strike and how well the blade normal
-/// (either face) lines up with the planned one.
-pub fn pose_term(blade: &V3, normal: &V3, plan: &Plan) -> f64 {
+/// Dense pose terms against the plan: `exp(−8·d)` of the blade centre's distance to the strike point,
+/// `exp(−2·θ)` of the angle between the blade normal (either face) and the planned normal.
+pub fn pose_terms(blade: &V3, normal: &V3, plan: &Plan) -> (f64, f64) {
     let u: V3 = plan.racket_quat * V3::z();
     let d = (blade - plan.strike_pos).norm();
-    (-(d / POSE_SCALE).powi(2)).exp() * normal.dot(&u).powi(2)
+    let theta = normal.dot(&u).abs().min(1.0).acos();
+    ((-8.0 * d).exp(), (-2.0 * theta).exp())
 }
 
 /// Sparse velocity term at contact.
 pub fn velocity_term(paddle_vel: &V3, plan: &Plan) -> f64 {
-    (-((paddle_vel - plan.racket_vel).norm() / VELOCITY_SCALE).powi(2)).exp()
+    (-(paddle_vel - plan.racket_vel).norm()).exp()
+}
+
+/// The task terms of a ball (robot frame) that this robot (side A of its frame) has just returned:
+/// predicted landing on the other half, closeness of the crossing of the other plane to the serve
+/// box's centre, that crossing in the box, or a predicted fault.
+pub fn task_terms(ball: &BallState, bounce: &BounceModel, terms: &mut RewardTerms) {
+    let lands = predicted_legal(ball, bounce);
+    if !lands {
+        terms.fault = 1.0;
+        return;
+    }
+    terms.landing = 1.0;
+    let crossing =
+        sim::predict::plane_crossing(&ball.pos, &ball.vel, Side::B.strike_plane_x(), bounce);
+    if let Some(c) = &crossing {
+        let (y_r, z) = Side::B.receiver_frame(&c.pos);
+        terms.centre = (-0.5 * (y_r * y_r + (z - SERVE_BOX_CENTRE_Z).powi(2)).sqrt()).exp();
+    }
+    if sim::predict::return_is_in_box(Side::A, &crossing) {
+        terms.in_box = 1.0;
+    }
 }
 
 /// Whether the ball (robot frame), just returned by this robot, is predicted to land on the other half.
@@ -253,6 +327,82 @@ pub fn blade(robot: &Robot) -> (V3, V3) {
     let p = &robot.paddle.pose;
     let rot: UnitQuaternion<f64> = p.rot;
     (p.to_world(&V3::from(arena::BLADE_OFFSET)), rot * V3::z())
+}
+
+/// The reward of one incoming ball, step by step: dense pose terms against the plan (in full once
+/// the ball was touched), the velocity term at contact, and the task terms once, `TASK_DELAY_STEPS`
+/// after the ball left the paddle.
+#[derive(Debug, Clone, Default)]
+struct StrokeReward {
+    /// Steps since the last control step with a paddle contact, once there was one.
+    since_contact: Option<usize>,
+    /// The task terms were paid for this ball.
+    judged: bool,
+}
+
+impl StrokeReward {
+    /// This step's terms for `robot` (robot frame), `contact` whether the paddle touched the ball in
+    /// it, `plan` the command. Returns the terms and whether the task terms were paid now.
+    fn step(
+        &mut self,
+        robot: &Robot,
+        ball_world: &BallState,
+        contact: bool,
+        plan: Option<&Plan>,
+        bounce: &BounceModel,
+    ) -> (RewardTerms, bool) {
+        let mut terms = RewardTerms {
+            grasp: grasp_term(robot),
+            ..RewardTerms::default()
+        };
+        let touched = contact || self.since_contact.is_some();
+        if contact {
+            if self.since_contact.is_none() {
+                terms.hit = 1.0;
+            }
+            self.since_contact = Some(0);
+        } else if let Some(k) = self.since_contact.as_mut() {
+            *k += 1;
+        }
+        if touched {
+            terms.position = 1.0;
+            terms.orientation = 1.0;
+        } else if let Some(plan) = plan {
+            let (c, n) = blade(robot);
+            (terms.position, terms.orientation) = pose_terms(&c, &n, plan);
+        }
+        if contact {
+            if let Some(plan) = plan {
+                terms.velocity = velocity_term(&robot.paddle.lin_vel, plan);
+            }
+        }
+        let mut paid = false;
+        if !self.judged && self.since_contact == Some(TASK_DELAY_STEPS) {
+            self.judged = true;
+            paid = true;
+            let f = robot.frame;
+            let local = BallState {
+                pos: f.point_from_world(&ball_world.pos),
+                vel: f.vector_from_world(&ball_world.vel),
+                spin: ball_world.spin,
+            };
+            task_terms(&local, bounce, &mut terms);
+        }
+        (terms, paid)
+    }
+}
+
+/// How a single-serve episode ends for training (DESIGN §11): the official code ends it
+/// `TASK_DELAY_STEPS` after the ball left the paddle and `MISS_GRACE` after the planned strike
+/// without contact, besides the rules; evaluation plays every episode to its rules' end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EpisodeEnd {
+    /// The rules and the time limit only (evaluation).
+    #[default]
+    Rules,
+    /// Also the official code's early ends (training).
+    Training,
 }
 
 /// One step of the environment.
@@ -268,8 +418,15 @@ pub struct Transition {
     pub done: bool,
     /// The robot has touched the ball (so far).
     pub hit: bool,
-    /// The return was legal.
+    /// The return was legal (so far; in a rally: a legal return by the learner in this step).
     pub success: bool,
+}
+
+fn paddle_contact(report: &sim::episode::StepReport, side: Side) -> bool {
+    report
+        .events
+        .iter()
+        .any(|e| e.kind == sim::ContactKind::Paddle { owner: side })
 }
 
 /// The single-serve RL environment: actions in [−1, 1] through a controller, observations and rewards
@@ -285,10 +442,13 @@ pub struct Env {
     pub weights: RewardWeights,
     /// Serve distribution.
     pub kind: sim::serve::ServeKind,
+    /// When an episode ends.
+    pub end: EpisodeEnd,
     obs: Vec<f64>,
     ctrl: Vec<f64>,
     bounce: BounceModel,
-    contact_rewarded: bool,
+    stroke: StrokeReward,
+    predicted_success: bool,
 }
 
 impl Env {
@@ -304,15 +464,18 @@ impl Env {
     ) -> Result<Env, String> {
         let episode = sim::episode::SingleServe::new(model.clone(), config, preset)?;
         Ok(Env {
-            observer: Observer::new(&model, blocks, 0),
+            observer: Observer::new(&model, blocks, 0)
+                .with_bounce(BounceModel::for_table(&preset.table)),
             mapper: crate::controller::ActionMapper::new(&model, controller),
             ctrl: vec![0.0; model.actuators.len()],
             episode,
             weights,
             kind,
+            end: EpisodeEnd::Rules,
             obs: Vec::new(),
             bounce: BounceModel::for_table(&preset.table),
-            contact_rewarded: false,
+            stroke: StrokeReward::default(),
+            predicted_success: false,
         })
     }
 
@@ -326,13 +489,19 @@ impl Env {
         self.mapper.action_dim()
     }
 
+    /// The observation of the current state.
+    pub fn observation(&self) -> &[f64] {
+        &self.obs
+    }
+
     /// A new episode from `seed`; returns the first observation.
     pub fn reset(&mut self, seed: u64) -> Vec<f64> {
         let (serve_seed, planner_seed) = crate::eval::episode_seeds(seed, 0);
         self.episode
             .reset(self.kind, &mut Rng::seeded(serve_seed), None);
         self.observer.reset(planner_seed);
-        self.contact_rewarded = false;
+        self.stroke = StrokeReward::default();
+        self.predicted_success = false;
         let (robot, ball, t) = (
             &self.episode.robot,
             self.episode.world.ball,
@@ -341,6 +510,12 @@ impl Env {
         self.observer.update_command(robot, &ball, t);
         self.observer.observe(robot, &ball, t, &mut self.obs);
         self.obs.clone()
+    }
+
+    /// Whether the return of this episode is judged legal: by the rules once the ball landed, or, in
+    /// a training episode that ended before, by the predicted landing.
+    pub fn success(&self) -> bool {
+        self.episode.success || (self.end == EpisodeEnd::Training && self.predicted_success)
     }
 
     /// One control step with `action` (entries clipped to [−1, 1]; a NaN or infinite entry ends the
@@ -371,33 +546,20 @@ impl Env {
         let robot = &self.episode.robot;
         let ball = self.episode.world.ball;
         let t = self.episode.world.time;
-        let mut terms = RewardTerms {
-            grasp: (-(robot.paddle_offset() / GRASP_SCALE).powi(2)).exp(),
-            ..RewardTerms::default()
-        };
-        let contact = report
-            .events
-            .iter()
-            .any(|e| e.kind == sim::ContactKind::Paddle { owner: Side::A });
-        if let Some((plan, _)) = self.observer.command() {
-            let (c, n) = blade(robot);
-            terms.command = pose_term(&c, &n, plan);
-            if contact {
-                terms.command += velocity_term(&robot.paddle.lin_vel, plan);
-            }
+        let contact = paddle_contact(&report, Side::A);
+        let plan = self.observer.command().map(|(p, _)| *p);
+        let strike_time = self.observer.command().map(|(_, t_hit)| *t_hit);
+        let (terms, judged) = self
+            .stroke
+            .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
+        if judged {
+            self.predicted_success = terms.landing > 0.0;
         }
-        if contact && !self.contact_rewarded {
-            self.contact_rewarded = true;
-            terms.task += 1.0;
-            let f = robot.frame;
-            let local = BallState {
-                pos: f.point_from_world(&ball.pos),
-                vel: f.vector_from_world(&ball.vel),
-                spin: ball.spin,
-            };
-            if predicted_legal(&local, &self.bounce) {
-                terms.task += 1.0;
-            }
+        let mut done = report.done;
+        if self.end == EpisodeEnd::Training {
+            let missed =
+                !self.episode.hit && strike_time.is_some_and(|t_hit| t > t_hit + MISS_GRACE);
+            done |= judged || missed;
         }
         self.observer.update_command(robot, &ball, t);
         self.observer.observe(robot, &ball, t, &mut self.obs);
@@ -405,9 +567,9 @@ impl Env {
             obs: self.obs.clone(),
             reward: terms.total(&self.weights),
             terms,
-            done: report.done,
+            done,
             hit: self.episode.hit,
-            success: self.episode.success,
+            success: self.success(),
         }
     }
 }
@@ -430,7 +592,7 @@ pub struct RallyEnv {
     ctrl: Vec<f64>,
     bounce: BounceModel,
     crossings_seen: usize,
-    contact_rewarded: bool,
+    stroke: StrokeReward,
     rallies: u64,
 }
 
@@ -447,16 +609,17 @@ impl RallyEnv {
     ) -> Result<RallyEnv, String> {
         let rally = sim::episode::Rally::new(model.clone(), config, preset)?;
         Ok(RallyEnv {
-            observer: Observer::new(&model, blocks, 0),
+            observer: Observer::new(&model, blocks, 0)
+                .with_bounce(BounceModel::for_table(&preset.table)),
             mapper: crate::controller::ActionMapper::new(&model, controller),
-            opponent: opponent.build(&model, Side::B, 0)?,
+            opponent: opponent.build(&model, &preset, 0)?,
             ctrl: vec![0.0; model.actuators.len()],
             rally,
             weights,
             obs: Vec::new(),
             bounce: BounceModel::for_table(&preset.table),
             crossings_seen: 0,
-            contact_rewarded: false,
+            stroke: StrokeReward::default(),
             rallies: 0,
         })
     }
@@ -485,7 +648,7 @@ impl RallyEnv {
         self.opponent.reset();
         self.opponent.reseed(agent_seed.wrapping_add(1));
         self.crossings_seen = 0;
-        self.contact_rewarded = false;
+        self.stroke = StrokeReward::default();
         let (robot, ball, t) = (
             &self.rally.arena.robots[0],
             self.rally.arena.world.ball,
@@ -534,41 +697,17 @@ impl RallyEnv {
         let report = self.rally.step();
         let robot = &self.rally.arena.robots[0];
         let (ball, t) = (self.rally.arena.world.ball, self.rally.arena.world.time);
-        let mut terms = RewardTerms {
-            grasp: (-(robot.paddle_offset() / GRASP_SCALE).powi(2)).exp(),
-            ..RewardTerms::default()
-        };
-        let contact = report
-            .events
-            .iter()
-            .any(|e| e.kind == sim::ContactKind::Paddle { owner: Side::A });
-        if let Some((plan, _)) = self.observer.command() {
-            let (c, n) = blade(robot);
-            terms.command = pose_term(&c, &n, plan);
-            if contact {
-                terms.command += velocity_term(&robot.paddle.lin_vel, plan);
-            }
-        }
-        if contact {
-            if !self.contact_rewarded {
-                terms.task += 1.0;
-                let local = BallState {
-                    pos: robot.frame.point_from_world(&ball.pos),
-                    vel: robot.frame.vector_from_world(&ball.vel),
-                    spin: ball.spin,
-                };
-                if predicted_legal(&local, &self.bounce) {
-                    terms.task += 1.0;
-                }
-            }
-            self.contact_rewarded = true;
-        }
-        // A new incoming ball for A re-arms the contact reward; A's return crossing B's plane in the
-        // serve box earns the dual term.
+        let contact = paddle_contact(&report, Side::A);
+        let plan = self.observer.command().map(|(p, _)| *p);
+        let (mut terms, _) = self
+            .stroke
+            .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
+        // A new incoming ball for A starts a new stroke; A's return crossing B's plane in the serve
+        // box earns the dual term.
         for c in &self.rally.crossings[self.crossings_seen..] {
             match c.receiver {
                 Side::B if c.exchange > 0 && c.in_box => terms.dual += 1.0,
-                Side::A => self.contact_rewarded = false,
+                Side::A => self.stroke = StrokeReward::default(),
                 Side::B => {}
             }
         }

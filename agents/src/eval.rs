@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 use serde::Serialize;
-use sim::arena::{Preset, Side};
+use sim::arena::Preset;
 use sim::config::ArenaConfig;
 use sim::episode::SingleServe;
 use sim::model::Model;
@@ -218,22 +218,21 @@ pub fn evaluate(
     );
     // Fail early, once, on anything wrong with the player or the arena.
     SingleServe::new(model.clone(), config, preset)?;
-    spec.build(&model, Side::A, 0)?;
+    spec.build(&model, &preset, 0)?;
+    // One environment and one player per worker (an ONNX player prepares its network once); each
+    // episode reseeds the player, so results do not depend on which worker played it.
     let results: Vec<EpisodeResult> = (0..episodes)
         .into_par_iter()
         .map_init(
             || {
                 let env = SingleServe::new(model.clone(), config, preset).expect("checked above");
-                (env, None::<Box<dyn Player>>)
+                let player = spec.build(&model, &preset, 0).expect("checked above");
+                (env, player)
             },
             |(env, player), i| {
                 let (serve_seed, agent_seed) = episode_seeds(seed, i);
-                let p = player.insert(
-                    spec.build(&model, Side::A, agent_seed)
-                        .expect("checked above"),
-                );
-                p.reseed(agent_seed);
-                let r = play_episode(env, p.as_mut(), kind, serve_seed);
+                player.reseed(agent_seed);
+                let r = play_episode(env, player.as_mut(), kind, serve_seed);
                 progress();
                 r
             },

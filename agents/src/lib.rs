@@ -17,6 +17,7 @@ pub mod ik;
 pub mod matchrun;
 pub mod planner;
 pub mod player;
+pub mod ppo;
 pub mod scripted;
 
 /// The simulator this crate drives, re-exported so that callers name one version of it.

@@ -269,8 +269,8 @@ pub fn play_match(
     progress: &mut dyn FnMut(u32),
 ) -> Result<(MatchRecord, Replay), String> {
     let players = [
-        a.build(&spec.model, Side::A, 0)?,
-        b.build(&spec.model, Side::B, 0)?,
+        a.build(&spec.model, &spec.preset, 0)?,
+        b.build(&spec.model, &spec.preset, 0)?,
     ];
     play_match_with(spec, players, [a.name(), b.name()], progress)
 }
@@ -420,8 +420,8 @@ pub fn replay_rally(
         ));
     }
     let mut players = [
-        a.build(&spec.model, Side::A, 0)?,
-        b.build(&spec.model, Side::B, 0)?,
+        a.build(&spec.model, &spec.preset, 0)?,
+        b.build(&spec.model, &spec.preset, 0)?,
     ];
     let mut rally = Rally::new(spec.model.clone(), &spec.config, spec.preset)?;
     let spec = MatchSpec {

@@ -2,7 +2,7 @@
 //! step — the scripted house agents now, trained checkpoints later — behind one trait, so the
 //! evaluation and the match runner treat them alike.
 
-use sim::arena::Side;
+use sim::arena::Preset;
 use sim::ball::BallState;
 use sim::model::Model;
 use sim::predict::BounceModel;
@@ -110,14 +110,20 @@ impl PlayerSpec {
         }
     }
 
-    /// A player for `model` on `side`.
-    pub fn build(&self, model: &Model, _side: Side, seed: u64) -> Result<Box<dyn Player>, String> {
+    /// A player for `model` in an arena of `preset` (its planner predicts with that preset's table
+    /// bounce).
+    pub fn build(
+        &self,
+        model: &Model,
+        preset: &Preset,
+        seed: u64,
+    ) -> Result<Box<dyn Player>, String> {
+        let bounce = BounceModel::for_table(&preset.table);
         match self {
             PlayerSpec::Scripted { params, .. } => {
                 let paddle = model
                     .body("paddle")
                     .ok_or("the model has no body named 'paddle'")?;
-                let bounce = BounceModel::for_table(&sim::arena::MYOCHALLENGE.table);
                 Ok(Box::new(Scripted::new(
                     model,
                     paddle,
@@ -128,7 +134,7 @@ impl PlayerSpec {
             }
             PlayerSpec::Checkpoint(c) => {
                 c.validate(model).map_err(|e| e.to_string())?;
-                let p = crate::checkpoint::CheckpointPlayer::new(c.clone(), model, seed)
+                let p = crate::checkpoint::CheckpointPlayer::new(c.clone(), model, bounce, seed)
                     .map_err(|e| e.to_string())?;
                 Ok(Box::new(p))
             }

@@ -92,7 +92,7 @@ fn a_player_producing_nan_loses_with_invalid_action_and_nothing_crashes() {
     let s = spec(2, 1, false);
     let good = PlayerSpec::scripted("scripted")
         .unwrap()
-        .build(&s.model, sim::Side::A, 0)
+        .build(&s.model, &s.preset, 0)
         .unwrap();
     let (r, _) = play_match_with(
         &s,

@@ -9,7 +9,9 @@ pub mod eval;
 pub mod matchcmd;
 pub mod model;
 pub mod plan;
+pub mod plot;
 pub mod serve;
+pub mod train;
 
 use nalgebra::Vector3;
 

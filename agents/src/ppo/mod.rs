@@ -1,0 +1,288 @@
+//! PPO (Schulman et al. 2017) with rsl_rl's semantics (DESIGN §11), on candle: GAE, the clipped
+//! surrogate and value losses, an entropy bonus, Adam with gradient-norm clipping, per-minibatch
+//! advantage normalisation, empirical observation normalisation, a Gaussian policy with a learned
+//! σ and the adaptive-KL learning rate. Environments step in parallel (rayon) and the policy runs
+//! once per step on all of them.
+//!
+//! - `gae`, `loss`, `normalizer`, `adam`: the algorithm's pieces, each tested against closed forms.
+//! - `policy`: the actor-critic network.
+//! - `trainer`: the training loop (rollout, update, statistics), deterministic in its seed.
+//! - `store`: a run's directory — resumable state, the checkpoint, the learning curve.
+
+pub mod adam;
+pub mod gae;
+pub mod loss;
+pub mod normalizer;
+pub mod policy;
+pub mod store;
+pub mod trainer;
+
+use serde::{Deserialize, Serialize};
+
+use crate::controller::{ControllerSpec, PdGains, Synergies};
+use crate::env::RewardWeights;
+
+/// Which of the paper's methods a run trains: the same PPO, reward and network, another action
+/// space (DESIGN §6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Diff-Muscle: joint targets through K-MAC.
+    Kmac,
+    /// Muscle-PPO: every muscle's control.
+    Muscle,
+    /// Muscle-PD (MuscleVAE-style): target muscle lengths.
+    MusclePd,
+    /// DynSyn: synergy groups and per-muscle weights.
+    Dynsyn,
+}
+
+impl Method {
+    /// The name of its committed checkpoint (`config/checkpoints/NAME.json`).
+    pub fn checkpoint_name(self) -> &'static str {
+        match self {
+            Method::Kmac => "kmac",
+            Method::Muscle => "muscle-ppo",
+            Method::MusclePd => "muscle-pd",
+            Method::Dynsyn => "dynsyn",
+        }
+    }
+
+    /// The paper's name for it.
+    pub fn paper_name(self) -> &'static str {
+        match self {
+            Method::Kmac => "Diff-Muscle",
+            Method::Muscle => "Muscle-PPO",
+            Method::MusclePd => "Muscle-PD",
+            Method::Dynsyn => "DynSyn",
+        }
+    }
+
+    /// Its name on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Kmac => "kmac",
+            Method::Muscle => "muscle",
+            Method::MusclePd => "muscle-pd",
+            Method::Dynsyn => "dynsyn",
+        }
+    }
+
+    /// All four, in the paper's table order.
+    pub const ALL: [Method; 4] = [
+        Method::Muscle,
+        Method::Dynsyn,
+        Method::MusclePd,
+        Method::Kmac,
+    ];
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Method, String> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("'{s}': the methods are kmac, muscle, muscle-pd and dynsyn"))
+    }
+}
+
+/// The learning-rate schedule.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Schedule {
+    /// Fixed.
+    Fixed,
+    /// rsl_rl's adaptive KL rule: per minibatch ÷1.5 when KL > 2·target, ×1.5 when KL < target/2,
+    /// within [1e-5, 1e-2].
+    Adaptive,
+}
+
+/// PPO's hyperparameters. The official code's values (DESIGN §11) are in the comments where ours
+/// differ; `config/train.toml` carries the same with both.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PpoConfig {
+    /// Parallel environments (official 1024).
+    pub envs: usize,
+    /// Control steps per environment per iteration (official 20).
+    pub steps_per_env: usize,
+    /// Passes over each rollout (official 5).
+    pub epochs: usize,
+    /// Minibatches per pass (official 4).
+    pub minibatches: usize,
+    /// Initial learning rate (official 5e-4).
+    pub learning_rate: f64,
+    /// Learning-rate schedule (official: adaptive in effect).
+    pub schedule: Schedule,
+    /// KL target of the adaptive schedule (official 0.01).
+    pub desired_kl: f64,
+    /// Clip of the ratio and the value (official 0.2).
+    pub clip: f64,
+    /// Value-loss coefficient (official 1.0).
+    pub value_coef: f64,
+    /// Entropy coefficient (official 0.01).
+    pub entropy_coef: f64,
+    /// Discount (official 0.99).
+    pub gamma: f64,
+    /// GAE λ (official 0.95).
+    pub lambda: f64,
+    /// Gradient-norm clip (official 1.0).
+    pub max_grad_norm: f64,
+    /// Initial policy σ (official 1.0).
+    pub init_std: f64,
+    /// Hidden layers of actor and critic, ELU (official 1024, 1024, 512, 512, 256, 256).
+    pub hidden: Vec<usize>,
+    /// Save the checkpoint and the resumable state every this many iterations (ours; also where a
+    /// segment of fresh episodes begins, so that a resumed run is the same run).
+    pub checkpoint_every: usize,
+    /// Multiplies every reward before PPO sees it (ours: the official rewards are O(100), which
+    /// makes the value loss dwarf the policy's gradient under one joint norm clip).
+    pub reward_scale: f64,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        PpoConfig {
+            envs: 64,
+            steps_per_env: 32,
+            epochs: 5,
+            minibatches: 4,
+            learning_rate: 5e-4,
+            schedule: Schedule::Adaptive,
+            desired_kl: 0.01,
+            clip: 0.2,
+            value_coef: 1.0,
+            entropy_coef: 0.01,
+            gamma: 0.99,
+            lambda: 0.95,
+            max_grad_norm: 1.0,
+            init_std: 0.5,
+            hidden: vec![128, 128],
+            checkpoint_every: 10,
+            reward_scale: 0.05,
+        }
+    }
+}
+
+/// The training episode: what is served.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainServe {
+    /// MyoChallenge P2 serves (the evaluation's distribution; the seeds differ).
+    P2,
+    /// The paper's rally serve from B's hitting plane (the official code's training serve).
+    Rally,
+}
+
+/// The controllers' settings (the same for every run of a method).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerConfig {
+    /// K-MAC's length PD gains, paper's form (official K_p 10, K_d 1).
+    pub kmac: PdGains,
+    /// Muscle-PD's gains (official K_p 10, K_d 1).
+    pub muscle_pd: PdGains,
+    /// DynSyn's number of synergy groups (ours; DynSyn is not in the official code).
+    pub dynsyn_groups: usize,
+    /// Seed of DynSyn's grouping.
+    pub dynsyn_seed: u64,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        ControllerConfig {
+            kmac: PdGains { kp: 10.0, kd: 1.0 },
+            muscle_pd: PdGains::MUSCLE_PD,
+            dynsyn_groups: 12,
+            dynsyn_seed: 1,
+        }
+    }
+}
+
+/// Everything a run is configured by (`config/train.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// PPO.
+    pub ppo: PpoConfig,
+    /// Reward weights.
+    pub reward: RewardWeights,
+    /// Controllers.
+    pub controller: ControllerConfig,
+    /// Training serves.
+    pub serve: Option<TrainServe>,
+}
+
+impl TrainConfig {
+    /// The training serve (P2 unless set).
+    pub fn serve(&self) -> TrainServe {
+        self.serve.unwrap_or(TrainServe::P2)
+    }
+
+    /// The controller a method's checkpoints carry.
+    pub fn controller(&self, method: Method, model: &sim::model::Model) -> ControllerSpec {
+        match method {
+            Method::Kmac => ControllerSpec::Kmac {
+                gains: self.controller.kmac,
+            },
+            Method::Muscle => ControllerSpec::Direct,
+            Method::MusclePd => ControllerSpec::MusclePd {
+                gains: self.controller.muscle_pd,
+            },
+            Method::Dynsyn => ControllerSpec::Dynsyn {
+                synergies: Synergies::derive(
+                    model,
+                    self.controller.dynsyn_groups,
+                    self.controller.dynsyn_seed,
+                ),
+            },
+        }
+    }
+
+    /// Refuses settings PPO cannot run with, naming the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let p = &self.ppo;
+        let checks: [(&str, bool); 10] = [
+            ("ppo.envs", p.envs >= 1),
+            ("ppo.steps_per_env", p.steps_per_env >= 1),
+            ("ppo.epochs", p.epochs >= 1),
+            (
+                "ppo.minibatches",
+                p.minibatches >= 1 && p.minibatches <= p.envs * p.steps_per_env,
+            ),
+            (
+                "ppo.learning_rate",
+                p.learning_rate > 0.0 && p.learning_rate.is_finite(),
+            ),
+            ("ppo.clip", p.clip > 0.0 && p.clip < 1.0),
+            (
+                "ppo.gamma",
+                (0.0..=1.0).contains(&p.gamma) && (0.0..=1.0).contains(&p.lambda),
+            ),
+            ("ppo.init_std", p.init_std > 0.0 && p.init_std.is_finite()),
+            ("ppo.checkpoint_every", p.checkpoint_every >= 1),
+            (
+                "ppo.hidden",
+                !p.hidden.is_empty() && p.hidden.iter().all(|&h| h >= 1),
+            ),
+        ];
+        match checks.iter().find(|(_, ok)| !ok) {
+            Some((field, _)) => Err(format!("{field}: out of range")),
+            None => Ok(()),
+        }
+    }
+}
+
+/// A 64-bit stream seed mixed from a run seed and up to three counters (SplitMix64 finaliser), so
+/// that every environment, episode and iteration draws from its own stream.
+pub fn stream_seed(seed: u64, a: u64, b: u64, c: u64) -> u64 {
+    let mix = |mut z: u64| {
+        z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    mix(mix(mix(mix(seed) ^ a) ^ b) ^ c)
+}

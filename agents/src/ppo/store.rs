@@ -1,0 +1,282 @@
+//! A training run's directory:
+//!
+//! - `checkpoint.json` — the policy in the agents' checkpoint format, with its provenance;
+//! - `curve.csv` — one row per iteration (the learning curve);
+//! - `resume/` — what `--resume` needs: `state.json` (configuration, counters, statistics,
+//!   normaliser, Adam's step count and learning rate) and `tensors.safetensors` (actor, critic,
+//!   log σ and Adam's moments).
+//!
+//! Every file is written to a temporary name and renamed into place, and `resume/` is replaced as a
+//! whole (`resume.new/` → `resume/`, the old one kept as `resume.old/` until then), so a run killed
+//! at any instant leaves a complete state behind.
+
+use std::collections::HashMap;
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use candle_core::{Device, Tensor};
+use serde::{Deserialize, Serialize};
+use sim::model::Model;
+
+use super::adam::Adam;
+use super::normalizer::RunningNormalizer;
+use super::trainer::{CurveRow, Progress, Trainer};
+use super::{Method, TrainConfig};
+
+/// Version of the resumable state's layout.
+pub const STATE_VERSION: u32 = 1;
+
+/// `resume/state.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunState {
+    /// [`STATE_VERSION`].
+    pub version: u32,
+    /// What is trained.
+    pub method: Method,
+    /// The run's seed.
+    pub seed: u64,
+    /// Its configuration.
+    pub config: TrainConfig,
+    /// Counters, statistics and the curve.
+    pub progress: Progress,
+    /// Observation statistics.
+    pub normalizer: RunningNormalizer,
+    /// Adam's steps taken.
+    pub adam_steps: u64,
+    /// The learning rate now.
+    pub learning_rate: f64,
+}
+
+fn io(path: &Path, e: impl std::fmt::Display) -> String {
+    format!("{}: {e}", path.display())
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    let tmp = path.with_extension("tmp");
+    let mut f = fs::File::create(&tmp).map_err(|e| io(&tmp, e))?;
+    f.write_all(bytes).map_err(|e| io(&tmp, e))?;
+    f.sync_all().map_err(|e| io(&tmp, e))?;
+    fs::rename(&tmp, path).map_err(|e| io(path, e))
+}
+
+/// The run directory `dir`.
+pub struct RunDir {
+    /// Its path.
+    pub dir: PathBuf,
+}
+
+impl RunDir {
+    /// The run directory at `dir` (created if missing).
+    pub fn open(dir: &Path) -> Result<RunDir, String> {
+        fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+        Ok(RunDir {
+            dir: dir.to_path_buf(),
+        })
+    }
+
+    /// `checkpoint.json`.
+    pub fn checkpoint_path(&self) -> PathBuf {
+        self.dir.join("checkpoint.json")
+    }
+
+    /// `curve.csv`.
+    pub fn curve_path(&self) -> PathBuf {
+        self.dir.join("curve.csv")
+    }
+
+    fn resume_dir(&self) -> PathBuf {
+        self.dir.join("resume")
+    }
+
+    /// Whether a resumable state is there (a complete `resume/`, or `resume.old/` left by a kill
+    /// between the two renames).
+    pub fn has_state(&self) -> bool {
+        self.state_dir().is_some()
+    }
+
+    fn state_dir(&self) -> Option<PathBuf> {
+        [self.resume_dir(), self.dir.join("resume.old")]
+            .into_iter()
+            .find(|d| d.join("state.json").is_file() && d.join("tensors.safetensors").is_file())
+    }
+
+    /// Saves the trainer's whole state, replacing the previous one.
+    pub fn save_state(&self, t: &Trainer) -> Result<(), String> {
+        let new = self.dir.join("resume.new");
+        let _ = fs::remove_dir_all(&new);
+        fs::create_dir_all(&new).map_err(|e| io(&new, e))?;
+        let state = RunState {
+            version: STATE_VERSION,
+            method: t.method,
+            seed: t.seed,
+            config: t.config.clone(),
+            progress: t.progress.clone(),
+            normalizer: t.normalizer.clone(),
+            adam_steps: t.adam.t,
+            learning_rate: t.adam.lr,
+        };
+        let mut tensors: HashMap<String, Tensor> = t.net.named().into_iter().collect();
+        for (k, (m, v)) in t.adam.m.iter().zip(&t.adam.v).enumerate() {
+            tensors.insert(format!("adam.m.{k}"), m.clone());
+            tensors.insert(format!("adam.v.{k}"), v.clone());
+        }
+        let tensor_path = new.join("tensors.safetensors");
+        candle_core::safetensors::save(&tensors, &tensor_path).map_err(|e| io(&tensor_path, e))?;
+        let json = serde_json::to_vec(&state).map_err(|e| e.to_string())?;
+        write_atomic(&new.join("state.json"), &json)?;
+        let cur = self.resume_dir();
+        let old = self.dir.join("resume.old");
+        let _ = fs::remove_dir_all(&old);
+        if cur.exists() {
+            fs::rename(&cur, &old).map_err(|e| io(&cur, e))?;
+        }
+        fs::rename(&new, &cur).map_err(|e| io(&new, e))?;
+        let _ = fs::remove_dir_all(&old);
+        Ok(())
+    }
+
+    /// Reads the saved state's description (without building a trainer).
+    pub fn read_state(&self) -> Result<RunState, String> {
+        let dir = self
+            .state_dir()
+            .ok_or_else(|| format!("{}: no resumable state (resume/)", self.dir.display()))?;
+        let path = dir.join("state.json");
+        let text = fs::read_to_string(&path).map_err(|e| io(&path, e))?;
+        let state: RunState = serde_json::from_str(&text).map_err(|e| io(&path, e))?;
+        if state.version != STATE_VERSION {
+            return Err(io(
+                &path,
+                format!(
+                    "state version {}; this build reads {STATE_VERSION}",
+                    state.version
+                ),
+            ));
+        }
+        Ok(state)
+    }
+
+    /// Rebuilds the trainer from the saved state.
+    pub fn load(&self, model: Arc<Model>) -> Result<Trainer, String> {
+        let state = self.read_state()?;
+        let dir = self.state_dir().expect("read_state found it");
+        let path = dir.join("tensors.safetensors");
+        let tensors =
+            candle_core::safetensors::load(&path, &Device::Cpu).map_err(|e| io(&path, e))?;
+        let mut t = Trainer::new(model, state.method, state.config.clone(), state.seed)?;
+        let take = |name: &str| -> Result<&Tensor, String> {
+            tensors
+                .get(name)
+                .ok_or_else(|| io(&path, format!("no tensor '{name}'")))
+        };
+        for (name, var) in t
+            .net
+            .named()
+            .iter()
+            .map(|(n, _)| n.clone())
+            .zip(t.net.vars())
+        {
+            let saved = take(&name)?;
+            if saved.dims() != var.dims() {
+                return Err(io(
+                    &path,
+                    format!(
+                        "'{name}' has shape {:?}, expected {:?}",
+                        saved.dims(),
+                        var.dims()
+                    ),
+                ));
+            }
+            var.set(saved).map_err(|e| io(&path, e))?;
+        }
+        let mut adam = Adam::new(t.net.vars(), state.learning_rate).map_err(|e| io(&path, e))?;
+        for k in 0..adam.m.len() {
+            adam.m[k] = take(&format!("adam.m.{k}"))?.clone();
+            adam.v[k] = take(&format!("adam.v.{k}"))?.clone();
+        }
+        adam.t = state.adam_steps;
+        t.adam = adam;
+        t.normalizer = state.normalizer;
+        t.progress = state.progress;
+        Ok(t)
+    }
+
+    /// Rewrites `curve.csv` from the rows.
+    pub fn write_curve(&self, rows: &[CurveRow]) -> Result<(), String> {
+        let mut out = String::from(
+            "iteration,env_steps,wall_s,episodes,reward,length,hit_rate,success_rate,mean_activation,tracking,learning_rate,kl,value_loss,surrogate_loss,entropy,std\n",
+        );
+        for r in rows {
+            out.push_str(&format!(
+                "{},{},{:.3},{},{:.4},{:.2},{:.4},{:.4},{:.5},{:.5},{:.3e},{:.3e},{:.5},{:.5},{:.4},{:.4}\n",
+                r.iteration,
+                r.env_steps,
+                r.wall_s,
+                r.episodes,
+                r.reward,
+                r.length,
+                r.hit_rate,
+                r.success_rate,
+                r.mean_activation,
+                r.tracking,
+                r.learning_rate,
+                r.kl,
+                r.value_loss,
+                r.surrogate_loss,
+                r.entropy,
+                r.std
+            ));
+        }
+        write_atomic(&self.curve_path(), out.as_bytes())
+    }
+}
+
+/// Reads a `curve.csv` back (for `rally plot`).
+pub fn read_curve(path: &Path) -> Result<Vec<CurveRow>, String> {
+    let text = fs::read_to_string(path).map_err(|e| io(path, e))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .ok_or_else(|| io(path, "empty"))?
+        .split(',')
+        .collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .ok_or_else(|| io(path, format!("no column '{name}'")))
+    };
+    let (ci, cs, cw, cr, ch, cu) = (
+        col("iteration")?,
+        col("env_steps")?,
+        col("wall_s")?,
+        col("reward")?,
+        col("hit_rate")?,
+        col("success_rate")?,
+    );
+    let mut rows = Vec::new();
+    for (k, line) in lines.enumerate() {
+        let f: Vec<&str> = line.split(',').collect();
+        let num = |c: usize| -> Result<f64, String> {
+            f.get(c).and_then(|v| v.parse::<f64>().ok()).ok_or_else(|| {
+                io(
+                    path,
+                    format!("line {}: column {} is not a number", k + 2, header[c]),
+                )
+            })
+        };
+        rows.push(CurveRow {
+            iteration: num(ci)? as u64,
+            env_steps: num(cs)? as u64,
+            wall_s: num(cw)?,
+            reward: num(cr)?,
+            hit_rate: num(ch)?,
+            success_rate: num(cu)?,
+            ..CurveRow::default()
+        });
+    }
+    Ok(rows)
+}

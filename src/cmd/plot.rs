@@ -1,0 +1,174 @@
+//! `rally plot`: learning curves of one or more training runs (reward, hit rate and success rate
+//! against control steps, one line per run) as a PNG, drawn with plotters. Text needs a TrueType
+//! font: the first of `FONT_PATHS` that exists (Debian's fonts-dejavu-core), or `RALLY_FONT`.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use agents::ppo::store::read_curve;
+use agents::ppo::trainer::CurveRow;
+use anyhow::anyhow;
+use clap::Args;
+use plotters::prelude::*;
+
+use super::CliError;
+
+/// Where a sans-serif TrueType font is looked for.
+pub const FONT_PATHS: [&str; 3] = [
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+];
+
+/// One run's curve and its legend label.
+pub struct Series {
+    /// Legend label.
+    pub label: String,
+    /// The rows.
+    pub rows: Vec<CurveRow>,
+}
+
+/// Registers the font once; the error says where it looked.
+fn font() -> Result<(), String> {
+    static DONE: OnceLock<Result<(), String>> = OnceLock::new();
+    DONE.get_or_init(|| {
+        let env = std::env::var("RALLY_FONT").ok();
+        let candidates: Vec<String> = env
+            .into_iter()
+            .chain(FONT_PATHS.iter().map(|s| s.to_string()))
+            .collect();
+        let path = candidates
+            .iter()
+            .find(|p| Path::new(p).is_file())
+            .ok_or_else(|| {
+                format!(
+                    "no TrueType font at {} (install fonts-dejavu-core, or set RALLY_FONT)",
+                    candidates.join(", ")
+                )
+            })?;
+        let bytes = std::fs::read(path).map_err(|e| format!("{path}: {e}"))?;
+        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+        plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+            .map_err(|_| format!("{path}: not a usable TrueType font"))
+    })
+    .clone()
+}
+
+/// The palette, one colour per run.
+const COLOURS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+/// Draws reward, hit rate and success rate against control steps for every series into `out`.
+pub fn learning_curves(series: &[Series], out: &Path) -> Result<(), String> {
+    font()?;
+    let root = BitMapBackend::new(out, (1500, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let panels = root.split_evenly((1, 3));
+    let max_steps = series
+        .iter()
+        .flat_map(|s| s.rows.iter().map(|r| r.env_steps))
+        .max()
+        .unwrap_or(1)
+        .max(1) as f64;
+    type Pick = fn(&CurveRow) -> f64;
+    let metrics: [(&str, Pick); 3] = [
+        ("mean episode reward", |r| r.reward),
+        ("hit rate (training)", |r| r.hit_rate),
+        ("success rate (training)", |r| r.success_rate),
+    ];
+    for (panel, (title, pick)) in panels.iter().zip(metrics) {
+        let values = series.iter().flat_map(|s| s.rows.iter().map(pick));
+        let (lo, hi) = if title.starts_with("mean") {
+            let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
+            if lo.is_finite() && hi > lo {
+                (lo.min(0.0), hi * 1.05)
+            } else {
+                (0.0, 1.0)
+            }
+        } else {
+            (0.0, 1.0)
+        };
+        let mut chart = ChartBuilder::on(panel)
+            .caption(title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(52)
+            .build_cartesian_2d(0.0..max_steps / 1e6, lo..hi)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("control steps (millions)")
+            .label_style(("sans-serif", 13))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (k, s) in series.iter().enumerate() {
+            let colour = COLOURS[k % COLOURS.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    s.rows.iter().map(|r| (r.env_steps as f64 / 1e6, pick(r))),
+                    colour.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?
+                .label(s.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::LowerRight)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
+/// Arguments of `rally plot`.
+#[derive(Args, Debug)]
+#[command(
+    after_help = "Example:\n  rally plot runs/kmac runs/muscle runs/muscle-pd runs/dynsyn --out docs/curves.png"
+)]
+pub struct PlotArgs {
+    /// Training run directories (each with a curve.csv) or curve.csv files; one line per run.
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// The PNG to write.
+    #[arg(long, default_value = "curves.png")]
+    out: PathBuf,
+}
+
+/// Runs `rally plot`.
+pub fn run(args: &PlotArgs) -> Result<(), CliError> {
+    let mut series = Vec::new();
+    for r in &args.runs {
+        let csv = if r.is_dir() {
+            r.join("curve.csv")
+        } else {
+            r.clone()
+        };
+        let rows = read_curve(&csv).map_err(CliError::Usage)?;
+        let label = if r.is_dir() {
+            r
+        } else {
+            r.parent().unwrap_or(r)
+        }
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_else(|| csv.display().to_string());
+        series.push(Series { label, rows });
+    }
+    learning_curves(&series, &args.out).map_err(|e| CliError::Failed(anyhow!(e)))?;
+    println!("{}", args.out.display());
+    Ok(())
+}

@@ -1,0 +1,248 @@
+//! `rally train`: PPO on one of the paper's methods in the single-serve environment, with a progress
+//! bar, a checkpoint and resumable state every `checkpoint_every` iterations, and the learning curve
+//! as CSV and PNG. A run killed at any moment continues with `--resume` as the same run (the same
+//! numbers as if it had never stopped).
+
+use std::path::{Path, PathBuf};
+
+use agents::ppo::store::{write_atomic, RunDir};
+use agents::ppo::trainer::{CurveRow, Trainer};
+use agents::ppo::{Method, TrainConfig};
+use anyhow::anyhow;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::CliError;
+
+/// Arguments of `rally train`.
+#[derive(Args, Debug)]
+#[command(after_help = "Examples:\n  \
+    rally train --method kmac --steps 2000000 --seed 1 --out runs/kmac\n  \
+    rally train --method kmac --steps 4000000 --seed 1 --out runs/kmac --resume   (continue, or extend)\n  \
+    rally plot runs/kmac runs/muscle --out curves.png\n\n\
+    Writes OUT/checkpoint.json (the agents' checkpoint format: rally eval OUT/checkpoint.json),\n\
+    OUT/curve.csv, OUT/curve.png and OUT/resume/ (what --resume reads).")]
+pub struct TrainArgs {
+    /// The method: kmac (Diff-Muscle), muscle (Muscle-PPO), muscle-pd or dynsyn.
+    #[arg(long, value_parser = parse_method)]
+    method: Method,
+    /// The environment: single (single serves); rally (the dual arena) is not trainable yet.
+    #[arg(long, default_value = "single", value_parser = ["single", "rally"])]
+    env: String,
+    /// Control steps to simulate in all (every environment's steps count), e.g. 2000000 or 2e6.
+    #[arg(long, value_parser = parse_steps)]
+    steps: u64,
+    /// Training seed: the initial weights, every training serve and the action noise derive from it.
+    #[arg(long, default_value = "1")]
+    seed: u64,
+    /// Run directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Continue the run saved in OUT (its method, seed and configuration must match).
+    #[arg(long)]
+    resume: bool,
+    /// Hyperparameters, reward weights and controller gains (TOML); default config/train.toml's values.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Name written into the checkpoint (default: the method's checkpoint name).
+    #[arg(long)]
+    name: Option<String>,
+    /// No progress bar; one line per checkpoint instead.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn parse_method(s: &str) -> Result<Method, String> {
+    s.parse()
+}
+
+/// Parses a positive step count, plain or in e-notation (clap value parser).
+pub fn parse_steps(s: &str) -> Result<u64, String> {
+    let x: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number"))?;
+    if !x.is_finite() || x < 1.0 || x > 1e12 {
+        return Err("must be between 1 and 1e12 control steps".into());
+    }
+    Ok(x as u64)
+}
+
+/// Reads a training configuration file (TOML); unknown keys are refused with their name.
+pub fn read_config(path: &Path) -> Result<TrainConfig, CliError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| CliError::Usage(format!("--config {}: {e}", path.display())))?;
+    let c: TrainConfig = toml::from_str(&text)
+        .map_err(|e| CliError::Usage(format!("--config {}: {e}", path.display())))?;
+    c.validate()
+        .map_err(|e| CliError::Usage(format!("--config {}: {e}", path.display())))?;
+    Ok(c)
+}
+
+/// The git commit of the working directory, or "unknown".
+pub fn git_commit() -> String {
+    std::process::Command::new("git")
+        .args(["rev-parse", "--short=12", "HEAD"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        .unwrap_or_else(|| "unknown".into())
+}
+
+fn status_line(r: &CurveRow, steps_per_s: f64) -> String {
+    format!(
+        "{:>7.0} steps/s  reward {:>7.1}  hit {:>5.1}%  success {:>5.1}%  lr {:.1e}  kl {:.4}",
+        steps_per_s,
+        r.reward,
+        100.0 * r.hit_rate,
+        100.0 * r.success_rate,
+        r.learning_rate,
+        r.kl
+    )
+}
+
+/// Saves the checkpoint, the curve (CSV and PNG) and, at a segment boundary, the resumable state.
+fn save(
+    dir: &RunDir,
+    t: &Trainer,
+    name: &str,
+    command: &str,
+    commit: &str,
+    with_state: bool,
+) -> Result<(), CliError> {
+    let ck = t
+        .checkpoint(name, command, commit)
+        .map_err(|e| anyhow!(e))?;
+    let json = serde_json::to_vec(&ck).map_err(anyhow::Error::from)?;
+    write_atomic(&dir.checkpoint_path(), &json).map_err(|e| anyhow!(e))?;
+    dir.write_curve(&t.progress.curve).map_err(|e| anyhow!(e))?;
+    let series = [super::plot::Series {
+        label: t.method.paper_name().to_string(),
+        rows: t.progress.curve.clone(),
+    }];
+    if let Err(e) = super::plot::learning_curves(&series, &dir.dir.join("curve.png")) {
+        eprintln!("warning: curve.png not written: {e}");
+    }
+    if with_state {
+        dir.save_state(t).map_err(|e| anyhow!(e))?;
+    }
+    Ok(())
+}
+
+/// Runs `rally train`.
+pub fn run(args: &TrainArgs) -> Result<(), CliError> {
+    if args.env == "rally" {
+        return Err(CliError::Usage(
+            "--env rally: training in the dual arena is not implemented yet (single serves only)"
+                .into(),
+        ));
+    }
+    let model = super::default_model()?;
+    let config = match &args.config {
+        Some(p) => read_config(p)?,
+        None => TrainConfig::default(),
+    };
+    let dir = RunDir::open(&args.out).map_err(|e| CliError::Usage(format!("--out: {e}")))?;
+    let mut trainer = if args.resume {
+        let state = dir
+            .read_state()
+            .map_err(|e| CliError::Usage(format!("--resume: {e}")))?;
+        if state.method != args.method || state.seed != args.seed {
+            return Err(CliError::Usage(format!(
+                "--resume: {} holds a {} run with seed {}, not {} with seed {}",
+                args.out.display(),
+                state.method.name(),
+                state.seed,
+                args.method.name(),
+                args.seed
+            )));
+        }
+        if args.config.is_some() && state.config != config {
+            return Err(CliError::Usage(format!(
+                "--resume: --config differs from the configuration {} was started with",
+                args.out.display()
+            )));
+        }
+        dir.load(model).map_err(|e| anyhow!(e))?
+    } else {
+        if dir.has_state() {
+            return Err(CliError::Usage(format!(
+                "--out {} already holds a run: pass --resume to continue it, or choose another directory",
+                args.out.display()
+            )));
+        }
+        Trainer::new(model, args.method, config, args.seed).map_err(|e| anyhow!(e))?
+    };
+    let name = args
+        .name
+        .clone()
+        .unwrap_or_else(|| args.method.checkpoint_name().to_string());
+    let command = std::env::args()
+        .map(|a| if a.contains(' ') { format!("'{a}'") } else { a })
+        .collect::<Vec<_>>()
+        .join(" ");
+    let commit = git_commit();
+    let every = trainer.config.ppo.checkpoint_every as u64;
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(args.steps)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {human_pos}/{human_len} steps, eta {eta}  {msg}")
+            .expect("valid template"),
+    );
+    bar.set_position(trainer.progress.env_steps.min(args.steps));
+    let started = std::time::Instant::now();
+    let first_steps = trainer.progress.env_steps;
+    while trainer.progress.env_steps < args.steps {
+        let row = trainer.iterate().map_err(|e| anyhow!(e))?;
+        let rate = (row.env_steps - first_steps) as f64 / started.elapsed().as_secs_f64();
+        bar.set_position(row.env_steps.min(args.steps));
+        bar.set_message(status_line(&row, rate));
+        let boundary = row.iteration.is_multiple_of(every);
+        if boundary {
+            save(&dir, &trainer, &name, &command, &commit, true)?;
+            if args.quiet {
+                eprintln!(
+                    "iteration {} ({} steps): {}",
+                    row.iteration,
+                    row.env_steps,
+                    status_line(&row, rate)
+                );
+            }
+        }
+    }
+    let at_boundary = trainer.progress.iteration.is_multiple_of(every);
+    save(&dir, &trainer, &name, &command, &commit, at_boundary)?;
+    bar.finish_and_clear();
+    let last = trainer.progress.curve.last().copied().unwrap_or_default();
+    let t = trainer.timing;
+    println!(
+        "{}: {} steps in {} iterations, {:.0} s of training ({:.0} steps/s this session: simulation {:.0}%, policy {:.0}%, update {:.0}%)",
+        args.method.paper_name(),
+        last.env_steps,
+        last.iteration,
+        last.wall_s,
+        t.env_steps as f64 / started.elapsed().as_secs_f64(),
+        100.0 * t.simulation / (t.simulation + t.policy + t.update).max(1e-9),
+        100.0 * t.policy / (t.simulation + t.policy + t.update).max(1e-9),
+        100.0 * t.update / (t.simulation + t.policy + t.update).max(1e-9),
+    );
+    println!(
+        "last {} training episodes: reward {:.1}, hit {:.1}%, success {:.1}% (predicted landing)",
+        trainer.progress.recent.len(),
+        last.reward,
+        100.0 * last.hit_rate,
+        100.0 * last.success_rate
+    );
+    println!("checkpoint: {}", dir.checkpoint_path().display());
+    if !at_boundary {
+        println!(
+            "(the resumable state is from iteration {}; --resume continues from there)",
+            trainer.progress.iteration - trainer.progress.iteration % every
+        );
+    }
+    Ok(())
+}
