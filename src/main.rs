@@ -37,6 +37,8 @@ enum Command {
     Plan(cmd::plan::PlanArgs),
     /// Draw the learning curves of training runs (reward, hit and success rate) as a PNG.
     Plot(cmd::plot::PlotArgs),
+    /// Evaluate the committed checkpoints of the four methods: the paper's Table I, as markdown.
+    Reproduce(cmd::reproduce::ReproduceArgs),
     /// Run the tournament server: REST API, match workers, leaderboard page, SQLite storage.
     Serve(cmd::serve::ServeArgs),
     /// Train a policy with PPO (Diff-Muscle or a baseline), resumable, with learning curves.
@@ -57,6 +59,7 @@ fn main() -> ExitCode {
         Command::Serve(args) => cmd::serve::run(&args),
         Command::Train(args) => cmd::train::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),
+        Command::Reproduce(args) => cmd::reproduce::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -146,6 +146,9 @@ pub struct Checkpoint {
     /// The network as an ONNX model instead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub onnx: Option<OnnxPolicy>,
+    /// Least control of the grip muscles (default none; see `env::apply_grip_floor`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grip_floor: Option<f64>,
     /// How it was trained, if `rally train` made it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub training: Option<Training>,
@@ -354,6 +357,11 @@ impl Checkpoint {
                 ));
             }
         }
+        if let Some(f) = self.grip_floor {
+            if !(0.0..=1.0).contains(&f) {
+                return Err(bad("grip_floor", "must be a control between 0 and 1"));
+            }
+        }
         let o = &self.observation;
         if o.blocks.is_empty() {
             return Err(bad("observation.blocks", "empty"));
@@ -468,6 +476,7 @@ impl Checkpoint {
             },
             policy: Some(Mlp { layers }),
             onnx: None,
+            grip_floor: None,
             training: None,
         }
     }
@@ -584,6 +593,7 @@ impl Player for CheckpointPlayer {
         let model = robot.held_model().clone();
         self.mapper
             .controls(&model, &robot.state, &action, sim::arena::CONTROL_DT, ctrl);
+        crate::env::apply_grip_floor(robot, self.checkpoint.grip_floor.unwrap_or(0.0), ctrl);
         Ok(())
     }
 }

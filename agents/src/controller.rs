@@ -274,6 +274,12 @@ impl MusclePd {
     }
 }
 
+/// Muscle-PPO's control for an action entry, as the official code maps it: `sigmoid(5·(a − 0.5))`
+/// (a ∈ [−1, 1] → u ∈ [0.0006, 0.92]; a = 0 asks for 0.08).
+pub fn direct_control(a: f64) -> f64 {
+    1.0 / (1.0 + (-5.0 * (a.clamp(-1.0, 1.0) - 0.5)).exp())
+}
+
 /// Direct (Muscle-PPO): the action is every muscle's control (clipped to [0, 1]) plus pelvis targets.
 pub fn direct_controls(space: &ActionSpace, muscles: &[f64], pelvis: &[f64], ctrl: &mut [f64]) {
     for (&a, &u) in space.muscles.iter().zip(muscles) {
@@ -577,8 +583,9 @@ impl ControllerSpec {
 }
 
 /// Turns a policy's action in [−1, 1]ⁿ into muscle and servo controls through a controller:
-/// joint targets `mid + a·half-range` (±π for unlimited hinges), lengths `lr0 + (a+1)/2·Δl`,
-/// controls `(a+1)/2`, DynSyn weights `1 + a`, servo targets over their control ranges.
+/// joint targets `mid + a·half-range` over the range widened by [`TARGET_MARGIN`] (±π for
+/// unlimited hinges), lengths `lr0 + (a+1)/2·Δl`,
+/// Muscle-PPO controls `sigmoid(5(a − 0.5))`, DynSyn values `(a+1)/2` and weights `1 + a`, servo targets over their control ranges.
 #[derive(Debug, Clone)]
 pub enum ActionMapper {
     /// K-MAC: one target per independent joint.
@@ -600,6 +607,19 @@ fn joint_range(model: &Model, j: usize) -> [f64; 2] {
     model.joints[j]
         .range
         .unwrap_or([-std::f64::consts::PI, std::f64::consts::PI])
+}
+
+/// How far past each end of a joint's range a K-MAC target may lie, as a fraction of the range: a
+/// target past a stop makes the muscles press against it, as the official model's fingers press on
+/// the handle before their joint limit (ours has the handle as the grip joint's stop at 1.0, so
+/// without the margin no action could squeeze the paddle).
+pub const TARGET_MARGIN: f64 = 0.05;
+
+/// The joint targets a K-MAC action spans: the range widened by [`TARGET_MARGIN`] at both ends.
+fn target_range(model: &Model, j: usize) -> [f64; 2] {
+    let [lo, hi] = joint_range(model, j);
+    let m = TARGET_MARGIN * (hi - lo);
+    [lo - m, hi + m]
 }
 
 fn servo_range(model: &Model, s: usize, j: usize) -> [f64; 2] {
@@ -674,7 +694,7 @@ impl ActionMapper {
                     .map(|((&j, servo), &a)| {
                         let r = match servo {
                             Some(s) => servo_range(model, *s, j),
-                            None => joint_range(model, j),
+                            None => target_range(model, j),
                         };
                         scale(a, r[0], r[1])
                     })
@@ -698,10 +718,7 @@ impl ActionMapper {
             }
             ActionMapper::Direct(space) => {
                 let n = space.muscles.len();
-                let u: Vec<f64> = action[..n]
-                    .iter()
-                    .map(|x| 0.5 * (x.clamp(-1.0, 1.0) + 1.0))
-                    .collect();
+                let u: Vec<f64> = action[..n].iter().map(|&x| direct_control(x)).collect();
                 let pelvis = servo_targets(space, &action[n..]);
                 direct_controls(space, &u, &pelvis, ctrl);
             }

@@ -405,6 +405,19 @@ pub enum EpisodeEnd {
     Training,
 }
 
+/// Keeps the grip muscles' controls at `floor` or above, whatever the controller asked: a trained
+/// checkpoint's `grip_floor` (the house agent does the same with its `grip_activation`). Our grip
+/// holds by the squeeze of three flexors; a policy trained with exploration noise gets that squeeze
+/// from the noise itself (muscles only pull, so jittered targets co-contract), and its noise-free
+/// mean action then lets the paddle slip — the floor keeps evaluation what training saw.
+pub fn apply_grip_floor(robot: &Robot, floor: f64, ctrl: &mut [f64]) {
+    if floor > 0.0 {
+        for &m in robot.grip_muscles() {
+            ctrl[m] = ctrl[m].max(floor);
+        }
+    }
+}
+
 /// One step of the environment.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Transition {
@@ -444,6 +457,8 @@ pub struct Env {
     pub kind: sim::serve::ServeKind,
     /// When an episode ends.
     pub end: EpisodeEnd,
+    /// Least control of the grip muscles (see [`apply_grip_floor`]).
+    pub grip_floor: f64,
     obs: Vec<f64>,
     ctrl: Vec<f64>,
     bounce: BounceModel,
@@ -472,6 +487,7 @@ impl Env {
             weights,
             kind,
             end: EpisodeEnd::Rules,
+            grip_floor: 0.0,
             obs: Vec::new(),
             bounce: BounceModel::for_table(&preset.table),
             stroke: StrokeReward::default(),
@@ -541,6 +557,7 @@ impl Env {
             arena::CONTROL_DT,
             &mut self.ctrl,
         );
+        apply_grip_floor(&self.episode.robot, self.grip_floor, &mut self.ctrl);
         self.episode.robot.state.ctrl.copy_from_slice(&self.ctrl);
         let report = self.episode.step();
         let robot = &self.episode.robot;

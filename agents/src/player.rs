@@ -52,6 +52,14 @@ impl Player for Scripted {
     }
 }
 
+static PLAYERS_BUILT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Players built by [`PlayerSpec::build`] in this process so far (evaluations and matches build one
+/// per worker or side, never one per episode: a test holds them to it).
+pub fn players_built() -> usize {
+    PLAYERS_BUILT.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// How to build a player: a recipe that can be sent to worker threads.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PlayerSpec {
@@ -118,6 +126,7 @@ impl PlayerSpec {
         preset: &Preset,
         seed: u64,
     ) -> Result<Box<dyn Player>, String> {
+        PLAYERS_BUILT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let bounce = BounceModel::for_table(&preset.table);
         match self {
             PlayerSpec::Scripted { params, .. } => {

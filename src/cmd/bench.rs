@@ -30,6 +30,11 @@ pub enum Target {
     Robot,
     /// Evaluation episodes and match rallies per second per core, with the scripted agent.
     Agents,
+    /// PPO training with the default configuration (`config/train.toml`, K-MAC): env steps/s while
+    /// training and in the rollout phase, the split between simulation, policy and update, next to
+    /// the physics alone (the same environments stepped with fixed controls, all cores) as the
+    /// ceiling, measured in the same run.
+    Train,
     /// The tournament server from outside: matches per hour, leaderboard requests per second and
     /// p99 latency (next to /healthz) while two matches run, peak memory.
     Server,
@@ -242,9 +247,103 @@ fn agent_rates(seconds: f64) -> anyhow::Result<(f64, f64, f64)> {
     ))
 }
 
+/// Training throughput for about `seconds` (at least two iterations), then the physics alone on the
+/// same number of environments for as long.
+pub fn train_rates(seconds: f64) -> anyhow::Result<serde_json::Value> {
+    use agents::ppo::trainer::Trainer;
+    use agents::ppo::{Method, TrainConfig};
+    use rayon::prelude::*;
+    let model = robot_model()?;
+    let config = TrainConfig::default();
+    let envs = config.ppo.envs;
+    let mut t = Trainer::new(model.clone(), Method::Kmac, config, 1).map_err(anyhow::Error::msg)?;
+    // The first iteration warms caches and starts the segment; time the ones after it.
+    t.iterate().map_err(anyhow::Error::msg)?;
+    t.timing = Default::default();
+    let start = Instant::now();
+    let mut iterations = 0;
+    while iterations < 2 || start.elapsed().as_secs_f64() < seconds {
+        t.iterate().map_err(anyhow::Error::msg)?;
+        iterations += 1;
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let tm = t.timing;
+    // The physics alone: the same environments, fixed controls (every muscle at 0.1), all cores.
+    let arena = sim::config::ArenaConfig::default();
+    let mut worlds: Vec<sim::episode::SingleServe> = (0..envs)
+        .map(|k| {
+            let mut w = sim::episode::SingleServe::new(model.clone(), &arena, MYOCHALLENGE)
+                .map_err(anyhow::Error::msg)?;
+            w.reset(ServeKind::P2, &mut Rng::seeded(k as u64), None);
+            Ok(w)
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let start = Instant::now();
+    let mut physics_steps = 0u64;
+    while start.elapsed().as_secs_f64() < seconds.max(0.5) {
+        worlds.par_iter_mut().enumerate().for_each(|(k, w)| {
+            for _ in 0..10 {
+                if w.done {
+                    w.reset(ServeKind::P2, &mut Rng::seeded(k as u64), None);
+                }
+                for (i, _) in model.muscles() {
+                    w.robot.state.ctrl[i] = 0.1;
+                }
+                w.step();
+            }
+        });
+        physics_steps += 10 * envs as u64;
+    }
+    let physics = physics_steps as f64 / start.elapsed().as_secs_f64();
+    let training = tm.env_steps as f64 / wall;
+    let rollout = tm.env_steps as f64 / (tm.simulation + tm.policy);
+    let total = (tm.simulation + tm.policy + tm.update).max(1e-9);
+    Ok(json!({
+        "target": "train",
+        "method": "kmac",
+        "threads": rayon::current_num_threads(),
+        "envs": envs,
+        "iterations": iterations,
+        "env_steps": tm.env_steps,
+        "training_steps_per_second": training,
+        "rollout_steps_per_second": rollout,
+        "physics_alone_steps_per_second": physics,
+        "rollout_vs_physics": rollout / physics,
+        "share": {
+            "simulation": tm.simulation / total,
+            "policy": tm.policy / total,
+            "update": tm.update / total,
+        },
+    }))
+}
+
 /// Runs `rally bench`.
 pub fn run(args: &BenchArgs) -> Result<(), CliError> {
     match args.target {
+        Target::Train => {
+            let r = train_rates(args.seconds)?;
+            if args.json {
+                println!("{r}");
+            } else {
+                let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+                let s = |k: &str| 100.0 * r["share"][k].as_f64().unwrap_or(f64::NAN);
+                println!(
+                    "PPO training, K-MAC, {} environments, {} threads ({} iterations, {} control steps):",
+                    r["envs"], r["threads"], r["iterations"], r["env_steps"]
+                );
+                println!("  training       {:>9.0} env steps/s (rollout and update)", f("training_steps_per_second"));
+                println!("  rollout phase  {:>9.0} env steps/s (simulation and policy)", f("rollout_steps_per_second"));
+                println!("  physics alone  {:>9.0} env steps/s (same environments, fixed controls: the ceiling)", f("physics_alone_steps_per_second"));
+                println!("  rollout / physics alone {:.2}", f("rollout_vs_physics"));
+                println!(
+                    "  time: simulation {:.0}%, policy {:.0}%, update {:.0}%",
+                    s("simulation"),
+                    s("policy"),
+                    s("update")
+                );
+            }
+            Ok(())
+        }
         Target::Server => {
             let r = server_bench(args.seconds, args.clients as usize)?;
             if args.json {

@@ -10,6 +10,7 @@ pub mod matchcmd;
 pub mod model;
 pub mod plan;
 pub mod plot;
+pub mod reproduce;
 pub mod serve;
 pub mod train;
 

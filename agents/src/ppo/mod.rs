@@ -188,6 +188,8 @@ pub struct ControllerConfig {
     pub dynsyn_groups: usize,
     /// Seed of DynSyn's grouping.
     pub dynsyn_seed: u64,
+    /// Least control of the grip muscles, for every method (ours; see `env::apply_grip_floor`).
+    pub grip_floor: f64,
 }
 
 impl Default for ControllerConfig {
@@ -197,6 +199,7 @@ impl Default for ControllerConfig {
             muscle_pd: PdGains::MUSCLE_PD,
             dynsyn_groups: 12,
             dynsyn_seed: 1,
+            grip_floor: 0.1,
         }
     }
 }
@@ -244,7 +247,7 @@ impl TrainConfig {
     /// Refuses settings PPO cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         let p = &self.ppo;
-        let checks: [(&str, bool); 10] = [
+        let checks: [(&str, bool); 11] = [
             ("ppo.envs", p.envs >= 1),
             ("ppo.steps_per_env", p.steps_per_env >= 1),
             ("ppo.epochs", p.epochs >= 1),
@@ -266,6 +269,10 @@ impl TrainConfig {
             (
                 "ppo.hidden",
                 !p.hidden.is_empty() && p.hidden.iter().all(|&h| h >= 1),
+            ),
+            (
+                "controller.grip_floor",
+                (0.0..=1.0).contains(&self.controller.grip_floor),
             ),
         ];
         match checks.iter().find(|(_, ok)| !ok) {

@@ -188,6 +188,7 @@ fn make_env(
         kind,
     )?;
     env.end = EpisodeEnd::Training;
+    env.grip_floor = config.controller.grip_floor;
     Ok(env)
 }
 
@@ -616,6 +617,8 @@ impl Trainer {
             },
             policy: Some(self.net.actor_mlp().map_err(e)?),
             onnx: None,
+            grip_floor: (self.config.controller.grip_floor > 0.0)
+                .then_some(self.config.controller.grip_floor),
             training: Some(Training {
                 method: self.method.name().into(),
                 command: command.into(),

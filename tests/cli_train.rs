@@ -1,0 +1,136 @@
+//! `rally train` and `rally plot` through the binary: a run killed with SIGKILL and resumed ends with
+//! the very checkpoint of a run that was never stopped; bad arguments exit 2 and write nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn rally(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(args)
+        .output()
+        .expect("rally runs")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("rally-cli-train-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// A small configuration: 8 environments × 16 steps per iteration, state every 2 iterations.
+fn config(dir: &Path) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let p = dir.join("tiny.toml");
+    std::fs::write(
+        &p,
+        "[ppo]\nenvs = 8\nsteps_per_env = 16\nhidden = [16, 16]\ncheckpoint_every = 2\n",
+    )
+    .unwrap();
+    p
+}
+
+fn policy_of(run: &Path) -> (serde_json::Value, serde_json::Value, serde_json::Value) {
+    let text = std::fs::read_to_string(run.join("checkpoint.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    (
+        v["policy"].clone(),
+        v["observation"].clone(),
+        v["training"]["env_steps"].clone(),
+    )
+}
+
+fn saved_iteration(run: &Path) -> Option<u64> {
+    let text = std::fs::read_to_string(run.join("resume/state.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v["progress"]["iteration"].as_u64()
+}
+
+#[test]
+fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
+    let base = tmp("kill");
+    let cfg = config(&base);
+    let cfg = cfg.to_str().unwrap();
+    let steps = "2560"; // 20 iterations
+    let straight = base.join("straight");
+    let out = rally(&[
+        "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
+        "--out", straight.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The same run, killed as soon as it has saved a state, then resumed.
+    let killed = base.join("killed");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args([
+            "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
+            "--out", killed.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while saved_iteration(&killed).is_none() && t0.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let at = saved_iteration(&killed).expect("a state was saved");
+    assert!(at < 20, "killed mid-run (state at iteration {at})");
+    let out = rally(&[
+        "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
+        "--out", killed.to_str().unwrap(), "--resume",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(policy_of(&killed), policy_of(&straight));
+    let curve = std::fs::read_to_string(killed.join("curve.csv")).unwrap();
+    assert_eq!(curve.lines().count(), 21, "a header and one row per iteration");
+    // `rally plot` draws both runs.
+    let png = base.join("curves.png");
+    let out = rally(&[
+        "plot",
+        straight.to_str().unwrap(),
+        killed.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+    // A second start without --resume refuses to overwrite the run.
+    let out = rally(&[
+        "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
+        "--out", straight.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--resume"));
+    // Resuming with another seed is refused and changes nothing.
+    let before = policy_of(&straight);
+    let out = rally(&[
+        "train", "--method", "kmac", "--steps", "5000", "--seed", "5", "--config", cfg, "--quiet",
+        "--out", straight.to_str().unwrap(), "--resume",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(policy_of(&straight), before);
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+#[test]
+fn bad_arguments_exit_2_and_name_what_is_wrong() {
+    let base = tmp("bad");
+    let out = rally(&["train", "--method", "telepathy", "--steps", "10", "--out", base.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("kmac"));
+    let out = rally(&["train", "--method", "kmac", "--steps", "-3", "--out", base.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    std::fs::create_dir_all(&base).unwrap();
+    let bad = base.join("bad.toml");
+    std::fs::write(&bad, "[ppo]\nepochz = 3\n").unwrap();
+    let out = rally(&[
+        "train", "--method", "kmac", "--steps", "10", "--config", bad.to_str().unwrap(), "--out",
+        base.join("run").to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("epochz"));
+    assert!(!base.join("run/checkpoint.json").exists());
+    let _ = std::fs::remove_dir_all(&base);
+}
