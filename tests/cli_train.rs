@@ -54,16 +54,40 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
     let steps = "2560"; // 20 iterations
     let straight = base.join("straight");
     let out = rally(&[
-        "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
-        "--out", straight.to_str().unwrap(),
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        steps,
+        "--seed",
+        "4",
+        "--config",
+        cfg,
+        "--quiet",
+        "--out",
+        straight.to_str().unwrap(),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // The same run, killed as soon as it has saved a state, then resumed.
     let killed = base.join("killed");
     let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
         .args([
-            "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
-            "--out", killed.to_str().unwrap(),
+            "train",
+            "--method",
+            "kmac",
+            "--steps",
+            steps,
+            "--seed",
+            "4",
+            "--config",
+            cfg,
+            "--quiet",
+            "--out",
+            killed.to_str().unwrap(),
         ])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
@@ -78,13 +102,32 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
     let at = saved_iteration(&killed).expect("a state was saved");
     assert!(at < 20, "killed mid-run (state at iteration {at})");
     let out = rally(&[
-        "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
-        "--out", killed.to_str().unwrap(), "--resume",
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        steps,
+        "--seed",
+        "4",
+        "--config",
+        cfg,
+        "--quiet",
+        "--out",
+        killed.to_str().unwrap(),
+        "--resume",
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(policy_of(&killed), policy_of(&straight));
     let curve = std::fs::read_to_string(killed.join("curve.csv")).unwrap();
-    assert_eq!(curve.lines().count(), 21, "a header and one row per iteration");
+    assert_eq!(
+        curve.lines().count(),
+        21,
+        "a header and one row per iteration"
+    );
     // `rally plot` draws both runs.
     let png = base.join("curves.png");
     let out = rally(&[
@@ -94,20 +137,45 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
         "--out",
         png.to_str().unwrap(),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
     // A second start without --resume refuses to overwrite the run.
     let out = rally(&[
-        "train", "--method", "kmac", "--steps", steps, "--seed", "4", "--config", cfg, "--quiet",
-        "--out", straight.to_str().unwrap(),
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        steps,
+        "--seed",
+        "4",
+        "--config",
+        cfg,
+        "--quiet",
+        "--out",
+        straight.to_str().unwrap(),
     ]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--resume"));
     // Resuming with another seed is refused and changes nothing.
     let before = policy_of(&straight);
     let out = rally(&[
-        "train", "--method", "kmac", "--steps", "5000", "--seed", "5", "--config", cfg, "--quiet",
-        "--out", straight.to_str().unwrap(), "--resume",
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        "5000",
+        "--seed",
+        "5",
+        "--config",
+        cfg,
+        "--quiet",
+        "--out",
+        straight.to_str().unwrap(),
+        "--resume",
     ]);
     assert_eq!(out.status.code(), Some(2));
     assert_eq!(policy_of(&straight), before);
@@ -117,16 +185,39 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
 #[test]
 fn bad_arguments_exit_2_and_name_what_is_wrong() {
     let base = tmp("bad");
-    let out = rally(&["train", "--method", "telepathy", "--steps", "10", "--out", base.to_str().unwrap()]);
+    let out = rally(&[
+        "train",
+        "--method",
+        "telepathy",
+        "--steps",
+        "10",
+        "--out",
+        base.to_str().unwrap(),
+    ]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("kmac"));
-    let out = rally(&["train", "--method", "kmac", "--steps", "-3", "--out", base.to_str().unwrap()]);
+    let out = rally(&[
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        "-3",
+        "--out",
+        base.to_str().unwrap(),
+    ]);
     assert_eq!(out.status.code(), Some(2));
     std::fs::create_dir_all(&base).unwrap();
     let bad = base.join("bad.toml");
     std::fs::write(&bad, "[ppo]\nepochz = 3\n").unwrap();
     let out = rally(&[
-        "train", "--method", "kmac", "--steps", "10", "--config", bad.to_str().unwrap(), "--out",
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        "10",
+        "--config",
+        bad.to_str().unwrap(),
+        "--out",
         base.join("run").to_str().unwrap(),
     ]);
     assert_eq!(out.status.code(), Some(2));

@@ -146,6 +146,12 @@ pub struct Checkpoint {
     /// The network as an ONNX model instead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub onnx: Option<OnnxPolicy>,
+    /// The policy's Gaussian σ per action entry, as trained: the player then acts with
+    /// `clip(μ + σ·ε)`, `ε` from its own seeded stream (so a match stays a function of its seed).
+    /// Absent, it plays the mean action. (PPO trains the stochastic policy; with K-MAC its mean can
+    /// differ a lot — muscles only pull, so the noise itself stiffens the arm.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy_std: Option<Vec<f64>>,
     /// Least control of the grip muscles (default none; see `env::apply_grip_floor`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grip_floor: Option<f64>,
@@ -410,6 +416,27 @@ impl Checkpoint {
             (None, None) => return Err(bad("policy", "missing: give `policy` (an MLP) or `onnx`")),
         };
         let mapper = ActionMapper::new(model, &self.controller);
+        if let Some(std) = &self.policy_std {
+            if std.len() != mapper.action_dim() {
+                return Err(bad(
+                    "policy_std",
+                    format!(
+                        "{} entries; the controller takes {} actions",
+                        std.len(),
+                        mapper.action_dim()
+                    ),
+                ));
+            }
+            if let Some(i) = std
+                .iter()
+                .position(|s| !(s.is_finite() && *s >= 0.0 && *s <= 10.0))
+            {
+                return Err(bad(
+                    format!("policy_std[{i}]"),
+                    "must be a number from 0 to 10",
+                ));
+            }
+        }
         if width != mapper.action_dim() {
             let field = match &self.policy {
                 Some(p) => format!("policy.layers[{}].bias", p.layers.len() - 1),
@@ -476,6 +503,7 @@ impl Checkpoint {
             },
             policy: Some(Mlp { layers }),
             onnx: None,
+            policy_std: None,
             grip_floor: None,
             training: None,
         }
@@ -540,6 +568,12 @@ pub struct CheckpointPlayer {
     mapper: ActionMapper,
     obs: Vec<f64>,
     seed: u64,
+    noise: sim::rng::Rng,
+}
+
+/// The stream of a checkpoint player's action noise for the agent seed `seed`.
+fn noise_stream(seed: u64) -> sim::rng::Rng {
+    sim::rng::Rng::seeded(seed ^ 0x6e6f_6973_655f_7374)
 }
 
 impl CheckpointPlayer {
@@ -559,6 +593,7 @@ impl CheckpointPlayer {
             checkpoint,
             obs: Vec::new(),
             seed,
+            noise: noise_stream(seed),
         })
     }
 }
@@ -566,11 +601,13 @@ impl CheckpointPlayer {
 impl Player for CheckpointPlayer {
     fn reset(&mut self) {
         self.observer.reset(self.seed);
+        self.noise = noise_stream(self.seed);
     }
 
     fn reseed(&mut self, seed: u64) {
         self.seed = seed;
         self.observer.reset(seed);
+        self.noise = noise_stream(seed);
     }
 
     fn act(
@@ -586,9 +623,14 @@ impl Player for CheckpointPlayer {
         for (x, (m, s)) in self.obs.iter_mut().zip(o.mean.iter().zip(&o.std)) {
             *x = (*x - m) / s;
         }
-        let action = self.network.forward(&self.obs).ok_or(InvalidAction)?;
+        let mut action = self.network.forward(&self.obs).ok_or(InvalidAction)?;
         if action.iter().any(|a| !a.is_finite()) {
             return Err(InvalidAction);
+        }
+        if let Some(std) = &self.checkpoint.policy_std {
+            for (a, s) in action.iter_mut().zip(std) {
+                *a = (*a + s * self.noise.normal()).clamp(-1.0, 1.0);
+            }
         }
         let model = robot.held_model().clone();
         self.mapper

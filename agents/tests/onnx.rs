@@ -30,6 +30,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
         onnx: Some(OnnxPolicy {
             model_base64: base64::engine::general_purpose::STANDARD.encode(bytes),
         }),
+        policy_std: None,
         grip_floor: None,
         training: None,
     }

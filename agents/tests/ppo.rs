@@ -9,9 +9,7 @@ use agents::ppo::trainer::Trainer;
 use agents::ppo::{Method, TrainConfig};
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(
-        sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"),
-    )
+    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"))
 }
 
 /// A small configuration that still runs the whole algorithm.
@@ -42,28 +40,49 @@ fn weights(t: &Trainer) -> Vec<Vec<u32>> {
 
 #[test]
 fn the_shipped_train_toml_is_the_default_configuration() {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../config/train.toml"))
-        .expect("config/train.toml");
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../config/train.toml"))
+            .expect("config/train.toml");
     let c: TrainConfig = toml::from_str(&text).expect("parses");
     assert_eq!(c, TrainConfig::default());
 }
 
 #[test]
-fn a_short_kmac_run_learns_to_track_the_command_and_fit_its_values() {
-    // 24 iterations of 16 envs × 32 steps (12 288 control steps): the critic's loss falls and the
-    // blade gets closer to the planned strike point than the untrained policy's.
-    let mut t = Trainer::new(model(), Method::Kmac, small(16, 32, 100), 3).unwrap();
-    let rows: Vec<_> = (0..24).map(|_| t.iterate().unwrap()).collect();
-    let first = &rows[..4];
-    let last = &rows[rows.len() - 4..];
-    let mean = |r: &[agents::ppo::trainer::CurveRow], f: fn(&agents::ppo::trainer::CurveRow) -> f64| {
-        r.iter().map(f).sum::<f64>() / r.len() as f64
-    };
-    let (v0, v1) = (mean(first, |r| r.value_loss), mean(last, |r| r.value_loss));
-    let (k0, k1) = (mean(first, |r| r.tracking), mean(last, |r| r.tracking));
+fn a_short_kmac_run_learns_a_signal() {
+    // 20 iterations of 64 envs × 16 steps (20 480 control steps), against the untrained policy: the
+    // critic's loss falls and the episodes' reward (command tracking and grasp, mostly) rises.
+    let mut t = Trainer::new(model(), Method::Kmac, small(64, 16, 100), 3).unwrap();
+    let mut rows = Vec::new();
+    let mut early = Vec::new();
+    for k in 0..20 {
+        let before = t.progress.episodes;
+        rows.push(t.iterate().unwrap());
+        let new = (t.progress.episodes - before) as usize;
+        if k < 4 {
+            early.extend(t.progress.recent.iter().rev().take(new).map(|e| e.reward));
+        }
+    }
+    let late: Vec<f64> = t
+        .progress
+        .recent
+        .iter()
+        .rev()
+        .take(early.len())
+        .map(|e| e.reward)
+        .collect();
+    let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+    let (r0, r1) = (mean(&early), mean(&late));
+    let v0 = rows[..3].iter().map(|r| r.value_loss).sum::<f64>() / 3.0;
+    let v1 = rows[17..].iter().map(|r| r.value_loss).sum::<f64>() / 3.0;
+    eprintln!(
+        "episode reward {r0:.1} → {r1:.1} ({} episodes each); value loss {v0:.3} → {v1:.3}",
+        early.len()
+    );
     assert!(v1 < 0.5 * v0, "value loss {v0} → {v1}");
-    assert!(k1 > k0, "tracking term {k0} → {k1}");
-    assert!(rows.iter().all(|r| r.kl.is_finite() && r.learning_rate > 0.0));
+    assert!(r1 > r0 * 1.05, "episode reward {r0} → {r1}");
+    assert!(rows
+        .iter()
+        .all(|r| r.kl.is_finite() && r.learning_rate > 0.0));
 }
 
 #[test]
@@ -98,7 +117,10 @@ fn a_resumed_run_is_the_same_run_bit_for_bit() {
             .map(|r| (r.iteration, r.episodes, r.value_loss.to_bits()))
             .collect()
     };
-    assert_eq!(strip(&resumed.progress.curve), strip(&straight.progress.curve));
+    assert_eq!(
+        strip(&resumed.progress.curve),
+        strip(&straight.progress.curve)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -109,7 +131,8 @@ fn every_method_trains_and_exports_a_checkpoint_that_plays() {
         let mut t = Trainer::new(m.clone(), method, small(2, 4, 10), 5).unwrap();
         t.iterate().unwrap();
         let ck = t.checkpoint("probe", "test", "none").unwrap();
-        ck.validate(&m).unwrap_or_else(|e| panic!("{method:?}: {e}"));
+        ck.validate(&m)
+            .unwrap_or_else(|e| panic!("{method:?}: {e}"));
         let text = serde_json::to_string(&ck).unwrap();
         let back = agents::checkpoint::Checkpoint::from_json(&text, &m).unwrap();
         assert_eq!(back.training.as_ref().unwrap().method, method.name());

@@ -26,6 +26,13 @@ impl Rng {
         lo + (hi - lo) * self.unit()
     }
 
+    /// A standard normal number (Box–Muller on two uniform draws; the cosine branch only).
+    pub fn normal(&mut self) -> f64 {
+        let u1 = 1.0 - self.unit();
+        let u2 = self.unit();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
     /// The next raw 64 bits (to seed a child stream).
     pub fn next_u64(&mut self) -> u64 {
         self.0.next_u64()

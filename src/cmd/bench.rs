@@ -331,8 +331,14 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
                     "PPO training, K-MAC, {} environments, {} threads ({} iterations, {} control steps):",
                     r["envs"], r["threads"], r["iterations"], r["env_steps"]
                 );
-                println!("  training       {:>9.0} env steps/s (rollout and update)", f("training_steps_per_second"));
-                println!("  rollout phase  {:>9.0} env steps/s (simulation and policy)", f("rollout_steps_per_second"));
+                println!(
+                    "  training       {:>9.0} env steps/s (rollout and update)",
+                    f("training_steps_per_second")
+                );
+                println!(
+                    "  rollout phase  {:>9.0} env steps/s (simulation and policy)",
+                    f("rollout_steps_per_second")
+                );
                 println!("  physics alone  {:>9.0} env steps/s (same environments, fixed controls: the ceiling)", f("physics_alone_steps_per_second"));
                 println!("  rollout / physics alone {:.2}", f("rollout_vs_physics"));
                 println!(

@@ -11,7 +11,7 @@ use super::{parse_preset, CliError};
 /// Arguments of `rally eval`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Agents: scripted, scripted-drive, scripted-soft (trained checkpoints arrive with the checkpoint format).\n\n\
+    after_help = "Agents: scripted, scripted-drive, scripted-soft, or a checkpoint file (rally train writes OUT/checkpoint.json).\n\n\
                   Example:\n  rally eval scripted --episodes 200 --seed 1 --serve p2"
 )]
 pub struct EvalArgs {
@@ -29,6 +29,10 @@ pub struct EvalArgs {
     /// Arena preset.
     #[arg(long, default_value = "myochallenge", value_parser = parse_preset)]
     preset: sim::Preset,
+    /// Play a trained checkpoint's mean action, without the Gaussian noise it was trained with
+    /// (`policy_std`).
+    #[arg(long)]
+    mean_action: bool,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -61,10 +65,26 @@ fn print_table(r: &EvalReport) {
     println!("  endings          {}", ends.join(", "));
 }
 
+/// The same player acting with its mean action (a checkpoint without its `policy_std`).
+pub fn mean_action(spec: agents::player::PlayerSpec) -> agents::player::PlayerSpec {
+    match spec {
+        agents::player::PlayerSpec::Checkpoint(c) => {
+            let mut c = (*c).clone();
+            c.policy_std = None;
+            c.name = format!("{} (mean action)", c.name);
+            agents::player::PlayerSpec::Checkpoint(std::sync::Arc::new(c))
+        }
+        other => other,
+    }
+}
+
 /// Runs `rally eval`.
 pub fn run(args: &EvalArgs) -> Result<(), CliError> {
     let model = super::default_model()?;
-    let spec = super::player(&args.agent, &model, "AGENT")?;
+    let mut spec = super::player(&args.agent, &model, "AGENT")?;
+    if args.mean_action {
+        spec = mean_action(spec);
+    }
     let config = sim::config::ArenaConfig::default();
     let kind = if args.serve == "p1" {
         ServeKind::P1

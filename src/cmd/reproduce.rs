@@ -32,7 +32,9 @@ pub fn paper_row(m: Method) -> (f64, f64, f64) {
 
 /// Arguments of `rally reproduce`.
 #[derive(Args, Debug)]
-#[command(after_help = "Example:\n  rally reproduce --episodes 1000 --seed 2026   (writes docs/reproduce.md and docs/reproduce_curves.png)")]
+#[command(
+    after_help = "Example:\n  rally reproduce --episodes 1000 --seed 2026   (writes docs/reproduce.md and docs/reproduce_curves.png)"
+)]
 pub struct ReproduceArgs {
     /// Episodes per agent.
     #[arg(long, default_value = "1000", value_parser = clap::value_parser!(u64).range(1..=100_000))]
@@ -47,6 +49,14 @@ pub struct ReproduceArgs {
     #[arg(long, default_value = "docs/reproduce.md")]
     out: PathBuf,
 }
+
+/// Who plays in the report: the method it stands for, its label, how to build it, its checkpoint.
+struct Entrant(
+    Option<Method>,
+    String,
+    Option<PlayerSpec>,
+    Option<Checkpoint>,
+);
 
 struct Row {
     method: Option<Method>,
@@ -81,25 +91,30 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
         episodes: args.episodes as usize,
         seed: args.seed,
     };
-    let mut agents: Vec<(Option<Method>, String, Option<PlayerSpec>, Option<Checkpoint>)> =
-        Vec::new();
+    let mut agents: Vec<Entrant> = Vec::new();
     for m in Method::ALL {
-        let path = args.checkpoints.join(format!("{}.json", m.checkpoint_name()));
+        let path = args
+            .checkpoints
+            .join(format!("{}.json", m.checkpoint_name()));
         match std::fs::read_to_string(&path) {
             Ok(text) => {
                 let c = Checkpoint::from_json(&text, &model)
                     .map_err(|e| CliError::Failed(anyhow!("{}: {e}", path.display())))?;
-                agents.push((
-                    Some(m),
-                    m.paper_name().into(),
-                    Some(PlayerSpec::Checkpoint(std::sync::Arc::new(c.clone()))),
-                    Some(c),
-                ));
+                let spec = PlayerSpec::Checkpoint(std::sync::Arc::new(c.clone()));
+                if c.policy_std.is_some() {
+                    agents.push(Entrant(
+                        Some(m),
+                        format!("{} (mean action)", m.paper_name()),
+                        Some(super::eval::mean_action(spec.clone())),
+                        Some(c.clone()),
+                    ));
+                }
+                agents.push(Entrant(Some(m), m.paper_name().into(), Some(spec), Some(c)));
             }
-            Err(_) => agents.push((Some(m), m.paper_name().into(), None, None)),
+            Err(_) => agents.push(Entrant(Some(m), m.paper_name().into(), None, None)),
         }
     }
-    agents.push((
+    agents.push(Entrant(
         None,
         "scripted (house agent, no learning)".into(),
         PlayerSpec::scripted("scripted"),
@@ -111,7 +126,7 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} episodes, {per_sec}, eta {eta}  {msg}")
             .expect("valid template"),
     );
-    for (method, label, spec, checkpoint) in agents {
+    for Entrant(method, label, spec, checkpoint) in agents {
         bar.set_message(label.clone());
         let report = match &spec {
             Some(s) => Some(
@@ -131,6 +146,7 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
     let curves_png = args.out.with_file_name("reproduce_curves.png");
     let series: Vec<Series> = rows
         .iter()
+        .filter(|r| !r.label.ends_with("(mean action)"))
         .filter_map(|r| {
             let t = r.checkpoint.as_ref()?.training.as_ref()?;
             Some(Series {
@@ -188,6 +204,12 @@ fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf>) -> Strin
     );
     let _ = writeln!(
         s,
+        "A trained checkpoint plays the Gaussian policy PPO trained (`policy_std`: its action noise comes \
+         from the agent's seeded stream, so every number here is a function of the seed); the rows marked \
+         *mean action* play the same network without the noise, as rsl_rl's `act_inference` does.\n"
+    );
+    let _ = writeln!(
+        s,
         "| Method | Hit % | Success % | Effort | Mean activation | Paper hit % | Paper success % | Paper effort | Training steps | Training time |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
@@ -242,7 +264,7 @@ fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf>) -> Strin
         }
     }
     let _ = writeln!(s, "\n## Provenance of the checkpoints\n");
-    for r in rows {
+    for r in rows.iter().filter(|r| !r.label.ends_with("(mean action)")) {
         if let Some(t) = r.checkpoint.as_ref().and_then(|c| c.training.as_ref()) {
             let _ = writeln!(
                 s,
@@ -262,7 +284,10 @@ fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf>) -> Strin
         }
     }
     if let Some(p) = curves {
-        let name = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        let name = p
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
         let _ = writeln!(s, "\n## Learning curves\n\n![learning curves]({name})\n");
     }
     s

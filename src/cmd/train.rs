@@ -62,7 +62,7 @@ pub fn parse_steps(s: &str) -> Result<u64, String> {
         .trim()
         .parse()
         .map_err(|_| format!("'{s}' is not a number"))?;
-    if !x.is_finite() || x < 1.0 || x > 1e12 {
+    if !(1.0..=1e12).contains(&x) {
         return Err("must be between 1 and 1e12 control steps".into());
     }
     Ok(x as u64)

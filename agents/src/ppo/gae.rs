@@ -132,8 +132,8 @@ mod tests {
                 a.advantages
             );
         }
-        for i in 0..4 {
-            assert!((a.returns[i] - a.advantages[i] - values[i]).abs() < 1e-6);
+        for ((r, adv), v) in a.returns.iter().zip(&a.advantages).zip(values) {
+            assert!((r - adv - v).abs() < 1e-6);
         }
     }
 

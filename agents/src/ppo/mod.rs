@@ -167,10 +167,11 @@ impl Default for PpoConfig {
 }
 
 /// The training episode: what is served.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum TrainServe {
     /// MyoChallenge P2 serves (the evaluation's distribution; the seeds differ).
+    #[default]
     P2,
     /// The paper's rally serve from B's hitting plane (the official code's training serve).
     Rally,
@@ -215,15 +216,10 @@ pub struct TrainConfig {
     /// Controllers.
     pub controller: ControllerConfig,
     /// Training serves.
-    pub serve: Option<TrainServe>,
+    pub serve: TrainServe,
 }
 
 impl TrainConfig {
-    /// The training serve (P2 unless set).
-    pub fn serve(&self) -> TrainServe {
-        self.serve.unwrap_or(TrainServe::P2)
-    }
-
     /// The controller a method's checkpoints carry.
     pub fn controller(&self, method: Method, model: &sim::model::Model) -> ControllerSpec {
         match method {

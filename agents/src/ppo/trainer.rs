@@ -172,7 +172,7 @@ fn make_env(
     controller: &ControllerSpec,
     config: &TrainConfig,
 ) -> Result<Env, String> {
-    let kind = match config.serve() {
+    let kind = match config.serve {
         TrainServe::P2 => ServeKind::P2,
         TrainServe::Rally => ServeKind::Rally {
             server: sim::arena::Side::B,
@@ -194,13 +194,6 @@ fn make_env(
 
 fn e(err: candle_core::Error) -> String {
     format!("tensor error: {err}")
-}
-
-/// A standard normal draw (Box–Muller on the portable stream).
-fn normal(rng: &mut Rng) -> f64 {
-    let u1 = 1.0 - rng.unit();
-    let u2 = rng.unit();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 fn mean_of(xs: impl Iterator<Item = f64>) -> f64 {
@@ -360,7 +353,7 @@ impl Trainer {
             let actions: Vec<f32> = mean_v
                 .iter()
                 .enumerate()
-                .map(|(i, &m)| m + std[i % a_dim] * normal(&mut noise) as f32)
+                .map(|(i, &m)| m + std[i % a_dim] * noise.normal() as f32)
                 .collect();
             let at = Self::tensor(actions.clone(), n_env, a_dim)?;
             let logp = loss::log_prob(&at, &mean, &log_std)
@@ -617,6 +610,14 @@ impl Trainer {
             },
             policy: Some(self.net.actor_mlp().map_err(e)?),
             onnx: None,
+            policy_std: Some(
+                self.net
+                    .std()
+                    .map_err(e)?
+                    .iter()
+                    .map(|&s| s as f64)
+                    .collect(),
+            ),
             grip_floor: (self.config.controller.grip_floor > 0.0)
                 .then_some(self.config.controller.grip_floor),
             training: Some(Training {
