@@ -317,9 +317,11 @@ pub fn task_terms(ball: &BallState, bounce: &BounceModel, terms: &mut RewardTerm
     }
 }
 
-/// Whether the ball (robot frame), just returned by this robot, is predicted to land on the other half.
+/// Whether the ball (robot frame), just returned by this robot, is predicted to land on the other half:
+/// its next bounce is there and it passes over the net on the way.
 pub fn predicted_legal(ball: &BallState, bounce: &BounceModel) -> bool {
     sim::predict::next_bounce(&ball.pos, &ball.vel, bounce).is_some_and(|b| b.pos.x < 0.0)
+        && sim::predict::clears_net(&ball.pos, &ball.vel)
 }
 
 /// Blade centre and normal of a robot's paddle (robot frame).

@@ -88,6 +88,19 @@ pub fn time_to_descend(z0: f64, vz: f64, z: f64) -> Option<f64> {
     (t >= 0.0).then_some(t)
 }
 
+/// Whether a drag-free flight from `pos` with `vel` passes over the net (or beside it) when it crosses
+/// `x = 0`: its centre at least a ball radius above the net's top there, or outside the net's width.
+/// A flight that never reaches `x = 0` does not meet the net.
+pub fn clears_net(pos: &V3, vel: &V3) -> bool {
+    if vel.x.abs() < 1e-12 || pos.x * vel.x >= 0.0 {
+        return true;
+    }
+    let t = -pos.x / vel.x;
+    let (p, _) = flight(pos, vel, t);
+    let beside = (p.y - arena::NET_CENTER[1]).abs() > arena::NET_HALF_SIZE[1] + arena::BALL_RADIUS;
+    beside || p.z > arena::NET_TOP_Z + arena::BALL_RADIUS
+}
+
 /// A predicted table bounce.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Bounce {
@@ -303,6 +316,23 @@ mod tests {
         assert!((pt.z - (1.2 + 0.5 * 0.3 - 0.5 * g * 0.3 * (0.3 + h))).abs() < 1e-12);
         assert!((pt.x - 0.5).abs() < 1e-12);
         assert!((vt.z - (0.5 - g * 0.3)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_return_that_clips_the_net_top_does_not_clear_it() {
+        // From x = 1.566 at 6.643 m/s towards the net, z = 1.101 rising at 0.454 m/s: it reaches
+        // x = 0 after 0.2357 s with its centre at z ≈ 0.935, below the net top plus a radius (0.9675)
+        // — a return seen in training that the landing prediction alone called legal.
+        let p = V3::new(1.566, -0.092, 1.101);
+        assert!(!clears_net(&p, &V3::new(-6.643, -0.549, 0.454)));
+        // Faster upwards it passes over; beside the net it passes whatever its height.
+        assert!(clears_net(&p, &V3::new(-6.643, -0.549, 1.2)));
+        assert!(clears_net(
+            &V3::new(1.0, 1.5, 0.9),
+            &V3::new(-5.0, 0.0, 0.0)
+        ));
+        // Flying away from the net, it never meets it.
+        assert!(clears_net(&p, &V3::new(6.0, 0.0, 0.0)));
     }
 
     #[test]

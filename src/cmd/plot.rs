@@ -83,7 +83,9 @@ pub fn learning_curves(series: &[Series], out: &Path) -> Result<(), String> {
         ("success rate (training)", |r| r.success_rate),
     ];
     for (panel, (title, pick)) in panels.iter().zip(metrics) {
-        let values = series.iter().flat_map(|s| s.rows.iter().map(pick));
+        let values = series
+            .iter()
+            .flat_map(|s| s.rows.iter().filter(|r| r.episodes > 0).map(pick));
         let (lo, hi) = if title.starts_with("mean") {
             let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                 (a.min(v), b.max(v))
@@ -113,7 +115,11 @@ pub fn learning_curves(series: &[Series], out: &Path) -> Result<(), String> {
             let colour = COLOURS[k % COLOURS.len()];
             chart
                 .draw_series(LineSeries::new(
-                    s.rows.iter().map(|r| (r.env_steps as f64 / 1e6, pick(r))),
+                    // Rows before the first finished episode have no statistics yet.
+                    s.rows
+                        .iter()
+                        .filter(|r| r.episodes > 0)
+                        .map(|r| (r.env_steps as f64 / 1e6, pick(r))),
                     colour.stroke_width(2),
                 ))
                 .map_err(|e| e.to_string())?

@@ -156,6 +156,7 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
                     .iter()
                     .map(|p| CurveRow {
                         env_steps: p.env_steps,
+                        episodes: 1,
                         reward: p.reward,
                         hit_rate: p.hit_rate,
                         success_rate: p.success_rate,

@@ -52,8 +52,10 @@ impl Adam {
             let v = ((&self.v[k] * BETA2)? + (g.sqr()? * (1.0 - BETA2))?)?;
             let step = ((&m / c1)? / ((&v / c2)?.sqrt()? + EPS)?)?;
             var.set(&(var.as_tensor() - (step * self.lr)?)?)?;
-            self.m[k] = m;
-            self.v[k] = v;
+            // Detached: each moment would otherwise keep the graph of every step before it, a
+            // chain as long as the run (memory, and a stack overflow when it is dropped).
+            self.m[k] = m.detach();
+            self.v[k] = v.detach();
         }
         Ok(())
     }

@@ -249,6 +249,7 @@ pub fn read_curve(path: &Path) -> Result<Vec<CurveRow>, String> {
             .position(|h| *h == name)
             .ok_or_else(|| io(path, format!("no column '{name}'")))
     };
+    let ce = col("episodes")?;
     let (ci, cs, cw, cr, ch, cu) = (
         col("iteration")?,
         col("env_steps")?,
@@ -272,6 +273,7 @@ pub fn read_curve(path: &Path) -> Result<Vec<CurveRow>, String> {
             iteration: num(ci)? as u64,
             env_steps: num(cs)? as u64,
             wall_s: num(cw)?,
+            episodes: num(ce)? as u64,
             reward: num(cr)?,
             hit_rate: num(ch)?,
             success_rate: num(cu)?,

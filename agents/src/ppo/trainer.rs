@@ -590,7 +590,9 @@ impl Trainer {
             .curve
             .iter()
             .enumerate()
-            .filter(|(i, _)| (i + 1) % stride == 0 || i + 1 == self.progress.curve.len())
+            .filter(|(i, r)| {
+                r.episodes > 0 && ((i + 1) % stride == 0 || i + 1 == self.progress.curve.len())
+            })
             .map(|(_, r)| TrainingPoint {
                 env_steps: r.env_steps,
                 reward: r.reward,
