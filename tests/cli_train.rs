@@ -30,6 +30,32 @@ fn config(dir: &Path) -> PathBuf {
     p
 }
 
+/// `rally train --method kmac --steps STEPS --seed SEED --config CFG --quiet --out OUT` plus `extra`.
+fn train_args<'a>(
+    steps: &'a str,
+    seed: &'a str,
+    cfg: &'a str,
+    out: &'a Path,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let mut a = vec![
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        steps,
+        "--seed",
+        seed,
+        "--config",
+        cfg,
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    a.extend_from_slice(extra);
+    a
+}
+
 fn policy_of(run: &Path) -> (serde_json::Value, serde_json::Value, serde_json::Value) {
     let text = std::fs::read_to_string(run.join("checkpoint.json")).unwrap();
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
@@ -53,20 +79,7 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
     let cfg = cfg.to_str().unwrap();
     let steps = "2560"; // 20 iterations
     let straight = base.join("straight");
-    let out = rally(&[
-        "train",
-        "--method",
-        "kmac",
-        "--steps",
-        steps,
-        "--seed",
-        "4",
-        "--config",
-        cfg,
-        "--quiet",
-        "--out",
-        straight.to_str().unwrap(),
-    ]);
+    let out = rally(&train_args(steps, "4", cfg, &straight, &[]));
     assert!(
         out.status.success(),
         "{}",
@@ -75,20 +88,7 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
     // The same run, killed as soon as it has saved a state, then resumed.
     let killed = base.join("killed");
     let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
-        .args([
-            "train",
-            "--method",
-            "kmac",
-            "--steps",
-            steps,
-            "--seed",
-            "4",
-            "--config",
-            cfg,
-            "--quiet",
-            "--out",
-            killed.to_str().unwrap(),
-        ])
+        .args(train_args(steps, "4", cfg, &killed, &[]))
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
@@ -101,21 +101,7 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
     child.wait().unwrap();
     let at = saved_iteration(&killed).expect("a state was saved");
     assert!(at < 20, "killed mid-run (state at iteration {at})");
-    let out = rally(&[
-        "train",
-        "--method",
-        "kmac",
-        "--steps",
-        steps,
-        "--seed",
-        "4",
-        "--config",
-        cfg,
-        "--quiet",
-        "--out",
-        killed.to_str().unwrap(),
-        "--resume",
-    ]);
+    let out = rally(&train_args(steps, "4", cfg, &killed, &["--resume"]));
     assert!(
         out.status.success(),
         "{}",
@@ -144,39 +130,12 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
     );
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
     // A second start without --resume refuses to overwrite the run.
-    let out = rally(&[
-        "train",
-        "--method",
-        "kmac",
-        "--steps",
-        steps,
-        "--seed",
-        "4",
-        "--config",
-        cfg,
-        "--quiet",
-        "--out",
-        straight.to_str().unwrap(),
-    ]);
+    let out = rally(&train_args(steps, "4", cfg, &straight, &[]));
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--resume"));
     // Resuming with another seed is refused and changes nothing.
     let before = policy_of(&straight);
-    let out = rally(&[
-        "train",
-        "--method",
-        "kmac",
-        "--steps",
-        "5000",
-        "--seed",
-        "5",
-        "--config",
-        cfg,
-        "--quiet",
-        "--out",
-        straight.to_str().unwrap(),
-        "--resume",
-    ]);
+    let out = rally(&train_args("5000", "5", cfg, &straight, &["--resume"]));
     assert_eq!(out.status.code(), Some(2));
     assert_eq!(policy_of(&straight), before);
     let _ = std::fs::remove_dir_all(&base);
