@@ -188,6 +188,19 @@ pub struct Training {
     /// The learning curve, at most a few hundred points.
     #[serde(default)]
     pub curve: Vec<TrainingPoint>,
+    /// The training environment: `single` (single serves) or `rally` (dual-arena self-play).
+    #[serde(default = "single_env")]
+    pub env: String,
+    /// The run whose weights this one started from (a warm start), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warm_start: Option<String>,
+    /// Mean legal returns per training rally over the last episodes (rally training only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rally_length: Option<f64>,
+}
+
+fn single_env() -> String {
+    "single".into()
 }
 
 /// One point of a checkpoint's learning curve.

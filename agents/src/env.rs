@@ -179,41 +179,79 @@ impl Observer {
     }
 }
 
-/// Reward weights (paper §IV-B; the values are the official code's, DESIGN §11):
-/// `r = w_g·r_g + w_c·r_c + w_s·r_s`, each a sum of named terms, plus `dual` in the rally arena.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// The reward's terms (paper §IV-B; DESIGN §6): `r = w_g·r_g + w_c·r_c + w_s·r_s`, each a sum of named
+/// terms. One struct holds both a step's term values (each in [0, 1]) and their weights
+/// ([`RewardWeights`]), so a term is named once.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RewardWeights {
+pub struct RewardTerms {
     /// Grasp (dense): `exp(−20·d)`, `d` the paddle's distance from its place in the hand (official ×4
     /// for position and ×4 for orientation; our grip holds both together).
     pub grasp: f64,
     /// Command (dense): `exp(−8·d)`, `d` the blade centre's distance from the planned strike point;
-    /// paid in full from contact on (official ×20).
+    /// paid in full from contact until the stroke is judged (official ×20).
     pub position: f64,
     /// Command (dense): `exp(−2·θ)`, `θ` the angle between the blade normal and the planned one
-    /// (either face); paid in full from contact on (official ×10).
+    /// (either face); paid in full from contact until the stroke is judged (official ×10).
     pub orientation: f64,
     /// Command (sparse, at contact): `exp(−|v − v̂|)`, the paddle's velocity against the planned
     /// racket velocity (paper §IV-B; not in the official code's list: ours).
     pub velocity: f64,
-    /// Task (sparse, once): the paddle touched the ball (official ×100).
+    /// Task (sparse, once per ball): the paddle touched the ball (official ×100).
     pub hit: f64,
-    /// Task (sparse, once): the return is predicted to land on the other half (official ×100).
+    /// Task (sparse, once per ball): the return is predicted to land on the other half (official ×100).
     pub landing: f64,
-    /// Task (sparse, once): `exp(−0.5·‖(y_r, z) − (0, 1.225)‖)` of the return's predicted crossing of
-    /// the other hitting plane, against the serve box's centre (official ×100).
+    /// Task (sparse, once per ball): `exp(−0.5·‖(y_r, z) − (0, 1.225)‖)` of the return's predicted
+    /// crossing of the other hitting plane, against the serve box's centre (official ×100).
     pub centre: f64,
-    /// Task (sparse, once): that crossing lies inside the serve box (official ×100).
+    /// Task (sparse, once per ball): that crossing lies inside the serve box (official ×100).
     pub in_box: f64,
-    /// Task (sparse, once): a return predicted to go into the net or out (official −20).
+    /// Task (sparse, once per ball): a return predicted to go into the net or out (official −20).
     pub fault: f64,
-    /// Dual rally: the learner's return really crossed the other hitting plane inside the serve box.
+    /// Dual rally only (dense): `exp(−4·d)`, `d` the paddle's distance from where it was at the
+    /// rally's start, while no ball is coming and no stroke is being judged — the paper's "maintain
+    /// stability after striking", so that the robot is ready for the next ball (ours).
+    #[serde(default)]
+    pub ready: f64,
+    /// Dual rally only (sparse): the robot's return really crossed the other hitting plane inside the
+    /// serve box (paper §IV-C).
     pub dual: f64,
+}
+
+impl RewardTerms {
+    /// `Σ wᵢ·termᵢ`.
+    pub fn total(&self, w: &RewardWeights) -> f64 {
+        let w = &w.0;
+        w.grasp * self.grasp
+            + w.position * self.position
+            + w.orientation * self.orientation
+            + w.velocity * self.velocity
+            + w.hit * self.hit
+            + w.landing * self.landing
+            + w.centre * self.centre
+            + w.in_box * self.in_box
+            + w.fault * self.fault
+            + w.ready * self.ready
+            + w.dual * self.dual
+    }
+}
+
+/// The weights of the reward's terms; the defaults are the official code's (DESIGN §11) where it has
+/// the term.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct RewardWeights(pub RewardTerms);
+
+impl std::ops::Deref for RewardWeights {
+    type Target = RewardTerms;
+    fn deref(&self) -> &RewardTerms {
+        &self.0
+    }
 }
 
 impl Default for RewardWeights {
     fn default() -> Self {
-        RewardWeights {
+        RewardWeights(RewardTerms {
             grasp: 4.0,
             position: 20.0,
             orientation: 10.0,
@@ -223,8 +261,9 @@ impl Default for RewardWeights {
             centre: 100.0,
             in_box: 100.0,
             fault: -20.0,
+            ready: 10.0,
             dual: 100.0,
-        }
+        })
     }
 }
 
@@ -235,47 +274,6 @@ pub const SERVE_BOX_CENTRE_Z: f64 = 0.5 * (arena::SERVE_BOX_Z.0 + arena::SERVE_B
 pub const TASK_DELAY_STEPS: usize = 3;
 /// A training episode without contact ends this long after the planned strike time, s (official).
 pub const MISS_GRACE: f64 = 0.05;
-
-/// The reward terms of one control step, before weighting (each in [0, 1]).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct RewardTerms {
-    /// Paddle in the hand.
-    pub grasp: f64,
-    /// Blade centre at the planned strike point.
-    pub position: f64,
-    /// Blade normal along the planned one.
-    pub orientation: f64,
-    /// Paddle velocity at contact.
-    pub velocity: f64,
-    /// First contact with this ball.
-    pub hit: f64,
-    /// Predicted landing on the other half.
-    pub landing: f64,
-    /// Closeness of the predicted crossing to the serve box's centre.
-    pub centre: f64,
-    /// Predicted crossing inside the serve box.
-    pub in_box: f64,
-    /// Predicted net or out.
-    pub fault: f64,
-    /// Dual rally: a real crossing of the other plane in the box.
-    pub dual: f64,
-}
-
-impl RewardTerms {
-    /// The weighted sum.
-    pub fn total(&self, w: &RewardWeights) -> f64 {
-        w.grasp * self.grasp
-            + w.position * self.position
-            + w.orientation * self.orientation
-            + w.velocity * self.velocity
-            + w.hit * self.hit
-            + w.landing * self.landing
-            + w.centre * self.centre
-            + w.in_box * self.in_box
-            + w.fault * self.fault
-            + w.dual * self.dual
-    }
-}
 
 /// Grasp term: 1 while the paddle is at its place in the hand, `exp(−20·d)` once it slips.
 pub fn grasp_term(robot: &Robot) -> f64 {
@@ -343,6 +341,13 @@ struct StrokeReward {
 }
 
 impl StrokeReward {
+    /// The ball was touched and its task terms are still to be paid.
+    fn in_progress(&self) -> bool {
+        self.since_contact.is_some() && !self.judged
+    }
+}
+
+impl StrokeReward {
     /// This step's terms for `robot` (robot frame), `contact` whether the paddle touched the ball in
     /// it, `plan` the command. Returns the terms and whether the task terms were paid now.
     fn step(
@@ -357,7 +362,7 @@ impl StrokeReward {
             grasp: grasp_term(robot),
             ..RewardTerms::default()
         };
-        let touched = contact || self.since_contact.is_some();
+        let touched = !self.judged && (contact || self.since_contact.is_some());
         if contact {
             if self.since_contact.is_none() {
                 terms.hit = 1.0;
@@ -593,30 +598,58 @@ impl Env {
     }
 }
 
-/// The dual-rally RL environment (paper §IV-C): the learner plays side A through a controller, an
-/// opponent player plays side B, rallies alternate their server. The reward adds the dual term: +1
-/// when the learner's return crosses B's hitting plane inside the serve box.
+/// One robot of the rally environment, driven by the learner's policy.
+struct Seat {
+    side: Side,
+    observer: Observer,
+    stroke: StrokeReward,
+    /// The paddle's position at the rally's start (robot frame): the `ready` term's target.
+    ready: V3,
+    obs: Vec<f64>,
+    /// This side touched the ball in this rally.
+    hit: bool,
+    /// Legal returns by this side in this rally.
+    returns: u32,
+    /// Had a command at the previous step (a new one starts a new stroke).
+    planned: bool,
+}
+
+/// The dual-rally RL environment (paper §IV-C), in self-play: the learner's policy plays both robots
+/// (each observes in its own frame), so one simulated step gives two transitions, and the policy
+/// meets exactly the balls it will meet in a `kmac-rally` against `kmac-rally` match. The server is
+/// drawn from the rally's seed and serves the heuristic rally serve. Each side's reward is the
+/// single-serve stroke reward for every ball that comes to it, the `ready` term between strokes
+/// and the `dual` term when its return crosses the other hitting plane inside the serve box. A rally
+/// ends by the rules (both sides' episodes end with it; CAPPED is a time limit, not a terminal).
 pub struct RallyEnv {
     /// The rally.
     pub rally: sim::episode::Rally,
-    /// Observation builder (side A).
-    pub observer: Observer,
-    /// Action → controls (side A).
+    /// Action → controls (both sides: the same controller).
     pub mapper: crate::controller::ActionMapper,
-    /// The opponent on side B.
-    pub opponent: Box<dyn crate::player::Player>,
     /// Reward weights.
     pub weights: RewardWeights,
-    obs: Vec<f64>,
+    /// Least control of the grip muscles (see [`apply_grip_floor`]).
+    pub grip_floor: f64,
+    seats: [Seat; 2],
     ctrl: Vec<f64>,
     bounce: BounceModel,
     crossings_seen: usize,
-    stroke: StrokeReward,
-    rallies: u64,
+}
+
+/// One step of the rally environment for one side.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RallyTransition {
+    /// The side's step, as in the single-serve environment (`hit`: this side touched the ball in
+    /// this rally; `success`: it made a legal return in this rally).
+    pub step: Transition,
+    /// Legal returns by this side in this rally so far.
+    pub returns: u32,
+    /// The position term, when the side tracked a command before touching its ball.
+    pub tracking: Option<f64>,
 }
 
 impl RallyEnv {
-    /// A rally environment for the robot `model` against `opponent`.
+    /// A rally environment for the robot `model`, `controller` on both sides.
     pub fn new(
         model: std::sync::Arc<Model>,
         config: &sim::config::ArenaConfig,
@@ -624,131 +657,179 @@ impl RallyEnv {
         controller: &crate::controller::ControllerSpec,
         blocks: Vec<ObsBlock>,
         weights: RewardWeights,
-        opponent: &crate::player::PlayerSpec,
     ) -> Result<RallyEnv, String> {
         let rally = sim::episode::Rally::new(model.clone(), config, preset)?;
+        let bounce = BounceModel::for_table(&preset.table);
+        let seat = |side| Seat {
+            side,
+            observer: Observer::new(&model, blocks.clone(), 0).with_bounce(bounce),
+            stroke: StrokeReward::default(),
+            ready: V3::zeros(),
+            obs: Vec::new(),
+            hit: false,
+            returns: 0,
+            planned: false,
+        };
         Ok(RallyEnv {
-            observer: Observer::new(&model, blocks, 0)
-                .with_bounce(BounceModel::for_table(&preset.table)),
             mapper: crate::controller::ActionMapper::new(&model, controller),
-            opponent: opponent.build(&model, &preset, 0)?,
             ctrl: vec![0.0; model.actuators.len()],
             rally,
             weights,
-            obs: Vec::new(),
-            bounce: BounceModel::for_table(&preset.table),
+            grip_floor: 0.0,
+            seats: [seat(Side::A), seat(Side::B)],
+            bounce,
             crossings_seen: 0,
-            stroke: StrokeReward::default(),
-            rallies: 0,
         })
     }
 
-    /// Observation length.
+    /// Observation length (per side).
     pub fn obs_dim(&self) -> usize {
-        self.observer.size()
+        self.seats[0].observer.size()
     }
 
-    /// Action length.
+    /// Action length (per side).
     pub fn action_dim(&self) -> usize {
         self.mapper.action_dim()
     }
 
-    /// A new rally from `seed` (A serves the even rallies of this environment, B the odd ones).
-    pub fn reset(&mut self, seed: u64) -> Vec<f64> {
-        let (serve_seed, agent_seed) = crate::eval::episode_seeds(seed, 0);
-        let server = if self.rallies.is_multiple_of(2) {
-            Side::A
-        } else {
-            Side::B
-        };
-        self.rallies += 1;
-        self.rally.reset(server, &mut Rng::seeded(serve_seed), None);
-        self.observer.reset(agent_seed);
-        self.opponent.reset();
-        self.opponent.reseed(agent_seed.wrapping_add(1));
-        self.crossings_seen = 0;
-        self.stroke = StrokeReward::default();
-        let (robot, ball, t) = (
-            &self.rally.arena.robots[0],
-            self.rally.arena.world.ball,
-            self.rally.arena.world.time,
-        );
-        self.observer.update_command(robot, &ball, t);
-        self.observer.observe(robot, &ball, t, &mut self.obs);
-        self.obs.clone()
+    /// Side `i`'s observation of the current state (0 = A, 1 = B).
+    pub fn observation(&self, i: usize) -> &[f64] {
+        &self.seats[i].obs
     }
 
-    /// One control step: the learner's `action` on A, the opponent on B.
-    pub fn step(&mut self, action: &[f64]) -> Transition {
-        if action.len() != self.action_dim() || action.iter().any(|a| !a.is_finite()) {
-            self.rally.invalid_action(Side::A);
-            return Transition {
-                obs: self.obs.clone(),
-                reward: 0.0,
-                terms: RewardTerms::default(),
-                done: true,
-                hit: false,
-                success: false,
-            };
-        }
-        let model = self.rally.arena.robots[0].held_model().clone();
+    /// Side `i`'s current command.
+    pub fn command(&self, i: usize) -> Option<&(Plan, f64)> {
+        self.seats[i].observer.command()
+    }
+
+    /// A new rally from `seed`: the server is drawn from it, then the serve and both planners'
+    /// samplers.
+    pub fn reset(&mut self, seed: u64) {
+        let (serve_seed, agent_seed) = crate::eval::episode_seeds(seed, 0);
+        let mut rng = Rng::seeded(serve_seed);
+        let server = if rng.unit() < 0.5 { Side::A } else { Side::B };
+        self.rally.reset(server, &mut rng, None);
+        self.crossings_seen = 0;
         let (ball, t) = (self.rally.arena.world.ball, self.rally.arena.world.time);
-        let a = &self.rally.arena.robots[0];
-        self.ctrl.copy_from_slice(&a.state.ctrl);
-        self.mapper
-            .controls(&model, &a.state, action, arena::CONTROL_DT, &mut self.ctrl);
-        self.rally.arena.robots[0]
-            .state
-            .ctrl
-            .copy_from_slice(&self.ctrl);
-        let b = &self.rally.arena.robots[1];
-        self.ctrl.copy_from_slice(&b.state.ctrl);
-        let ok = self.opponent.act(b, &ball, t, &mut self.ctrl).is_ok()
-            && self.ctrl.iter().all(|c| c.is_finite());
-        if ok {
-            self.rally.arena.robots[1]
+        for (i, seat) in self.seats.iter_mut().enumerate() {
+            let robot = &self.rally.arena.robots[i];
+            seat.observer.reset(agent_seed.wrapping_add(i as u64));
+            seat.stroke = StrokeReward::default();
+            seat.ready = robot.paddle.pose.pos;
+            seat.hit = false;
+            seat.returns = 0;
+            seat.observer.update_command(robot, &ball, t);
+            seat.planned = seat.observer.command().is_some();
+            seat.observer.observe(robot, &ball, t, &mut seat.obs);
+        }
+    }
+
+    /// One control step with both sides' actions (entries clipped to [−1, 1] by the caller; a NaN
+    /// or infinite entry loses the rally for that side with INVALID_ACTION and no reward).
+    pub fn step(&mut self, actions: [&[f64]; 2]) -> [RallyTransition; 2] {
+        let model = self.rally.arena.robots[0].held_model().clone();
+        let mut invalid = None;
+        for (i, action) in actions.iter().enumerate() {
+            if action.len() != self.action_dim() || action.iter().any(|a| !a.is_finite()) {
+                invalid.get_or_insert(self.seats[i].side);
+                continue;
+            }
+            let robot = &self.rally.arena.robots[i];
+            self.ctrl.copy_from_slice(&robot.state.ctrl);
+            self.mapper.controls(
+                &model,
+                &robot.state,
+                action,
+                arena::CONTROL_DT,
+                &mut self.ctrl,
+            );
+            apply_grip_floor(robot, self.grip_floor, &mut self.ctrl);
+            self.rally.arena.robots[i]
                 .state
                 .ctrl
                 .copy_from_slice(&self.ctrl);
-        } else {
-            self.rally.invalid_action(Side::B);
         }
-        let report = self.rally.step();
-        let robot = &self.rally.arena.robots[0];
-        let (ball, t) = (self.rally.arena.world.ball, self.rally.arena.world.time);
-        let contact = paddle_contact(&report, Side::A);
-        let plan = self.observer.command().map(|(p, _)| *p);
-        let (mut terms, _) = self
-            .stroke
-            .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
-        // A new incoming ball for A starts a new stroke; A's return crossing B's plane in the serve
-        // box earns the dual term.
-        for c in &self.rally.crossings[self.crossings_seen..] {
-            match c.receiver {
-                Side::B if c.exchange > 0 && c.in_box => terms.dual += 1.0,
-                Side::A => self.stroke = StrokeReward::default(),
-                Side::B => {}
-            }
-        }
-        self.crossings_seen = self.rally.crossings.len();
-        self.observer.update_command(robot, &ball, t);
-        self.observer.observe(robot, &ball, t, &mut self.obs);
-        let returns_by_a = report.calls.iter().any(|c| {
-            matches!(
-                c,
-                sim::rules::Call::LegalReturn {
-                    hitter: Side::A,
-                    ..
+        let report = match invalid {
+            Some(side) => {
+                self.rally.invalid_action(side);
+                sim::episode::StepReport {
+                    done: true,
+                    ..Default::default()
                 }
-            )
+            }
+            None => self.rally.step(),
+        };
+        let (ball, t) = (self.rally.arena.world.ball, self.rally.arena.world.time);
+        let new_crossings = &self.rally.crossings[self.crossings_seen..];
+        let out = std::array::from_fn(|i| {
+            let seat = &mut self.seats[i];
+            let robot = &self.rally.arena.robots[i];
+            let side = seat.side;
+            if invalid.is_some() {
+                return RallyTransition {
+                    step: Transition {
+                        obs: seat.obs.clone(),
+                        reward: 0.0,
+                        terms: RewardTerms::default(),
+                        done: true,
+                        hit: seat.hit,
+                        success: seat.returns > 0,
+                    },
+                    returns: seat.returns,
+                    tracking: None,
+                };
+            }
+            let contact = paddle_contact(&report, side);
+            seat.hit |= contact;
+            let plan = seat.observer.command().map(|(p, _)| *p);
+            let tracking = plan.is_some() && seat.stroke.since_contact.is_none() && !contact;
+            let (mut terms, _) =
+                seat.stroke
+                    .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
+            if plan.is_none() && !seat.stroke.in_progress() {
+                let d = (robot.paddle.pose.pos - seat.ready).norm();
+                terms.ready = (-4.0 * d).exp();
+            }
+            // This side's return (exchange ≥ 1) crossing the other side's plane in the box.
+            terms.dual = new_crossings
+                .iter()
+                .filter(|c| c.receiver == side.other() && c.exchange > 0 && c.in_box)
+                .count() as f64;
+            seat.returns += report
+                .calls
+                .iter()
+                .filter(|c| matches!(c, sim::rules::Call::LegalReturn { hitter, .. } if *hitter == side))
+                .count() as u32;
+            seat.observer.update_command(robot, &ball, t);
+            let planned = seat.observer.command().is_some();
+            if planned && !seat.planned {
+                // A new ball is coming: a new stroke.
+                seat.stroke = StrokeReward::default();
+            }
+            seat.planned = planned;
+            seat.observer.observe(robot, &ball, t, &mut seat.obs);
+            RallyTransition {
+                step: Transition {
+                    obs: seat.obs.clone(),
+                    reward: terms.total(&self.weights),
+                    terms,
+                    done: report.done,
+                    hit: seat.hit,
+                    success: seat.returns > 0,
+                },
+                returns: seat.returns,
+                tracking: tracking.then_some(terms.position),
+            }
         });
-        Transition {
-            obs: self.obs.clone(),
-            reward: terms.total(&self.weights),
-            terms,
-            done: report.done,
-            hit: contact,
-            success: returns_by_a,
-        }
+        self.crossings_seen = self.rally.crossings.len();
+        out
+    }
+
+    /// Whether the rally ended by its cap or time limit (CAPPED), not by a failure.
+    pub fn capped(&self) -> bool {
+        self.rally
+            .referee
+            .end()
+            .is_some_and(|e| e.failing_side.is_none())
     }
 }

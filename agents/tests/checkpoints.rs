@@ -169,10 +169,9 @@ fn the_rl_environment_is_deterministic_and_survives_nan() {
 }
 
 #[test]
-fn the_rally_environment_steps_deterministically_against_an_opponent() {
+fn the_rally_environment_steps_both_robots_deterministically() {
     use agents::env::RallyEnv;
     let m = model();
-    let opponent = PlayerSpec::scripted("scripted").unwrap();
     let mk = || {
         RallyEnv::new(
             m.clone(),
@@ -181,22 +180,40 @@ fn the_rally_environment_steps_deterministically_against_an_opponent() {
             &kmac(),
             ObsBlock::ALL.to_vec(),
             RewardWeights::default(),
-            &opponent,
         )
         .unwrap()
     };
     let (mut e1, mut e2) = (mk(), mk());
-    assert_eq!(e1.reset(3), e2.reset(3));
+    e1.reset(3);
+    e2.reset(3);
+    assert_eq!(e1.observation(0), e2.observation(0));
+    assert_eq!(e1.observation(1), e2.observation(1));
+    // The receiver of the serve has a command; the server has none and is paid for being ready.
+    let server = (e1.rally.referee.server() == sim::arena::Side::B) as usize;
+    assert!(e1.command(1 - server).is_some() && e1.command(server).is_none());
     let action = vec![0.0; e1.action_dim()];
     let mut steps = 0;
     loop {
-        let (t1, t2) = (e1.step(&action), e2.step(&action));
+        let (t1, t2) = (e1.step([&action, &action]), e2.step([&action, &action]));
         assert_eq!(t1, t2);
-        assert!(t1.reward.is_finite());
+        if steps == 0 {
+            assert!(
+                t1[server].step.terms.ready > 0.9,
+                "{:?}",
+                t1[server].step.terms
+            );
+            assert_eq!(t1[1 - server].step.terms.ready, 0.0);
+        }
+        assert!(t1.iter().all(|t| t.step.reward.is_finite()));
         steps += 1;
-        if t1.done {
+        if t1[0].step.done {
+            assert!(t1[1].step.done);
             break;
         }
     }
     assert!(steps > 10 && e1.rally.referee.end().is_some());
+    // A different seed is a different rally.
+    e2.reset(4);
+    e1.reset(3);
+    assert_ne!(e1.observation(0), e2.observation(0));
 }

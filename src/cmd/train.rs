@@ -1,4 +1,4 @@
-//! `rally train`: PPO on one of the paper's methods in the single-serve environment, with a progress
+//! `rally train`: PPO on one of the paper's methods in the single-serve or the rally environment, with a progress
 //! bar, a checkpoint and resumable state every `checkpoint_every` iterations, and the learning curve
 //! as CSV and PNG. A run killed at any moment continues with `--resume` as the same run (the same
 //! numbers as if it had never stopped).
@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use agents::ppo::store::{write_atomic, RunDir};
 use agents::ppo::trainer::{CurveRow, Trainer};
-use agents::ppo::{Method, TrainConfig};
+use agents::ppo::{Method, TrainConfig, TrainEnv};
 use anyhow::anyhow;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -19,6 +19,7 @@ use super::CliError;
 #[command(after_help = "Examples:\n  \
     rally train --method kmac --steps 2000000 --seed 1 --out runs/kmac\n  \
     rally train --method kmac --steps 4000000 --seed 1 --out runs/kmac --resume   (continue, or extend)\n  \
+    rally train --method kmac --env rally --init runs/kmac --steps 4000000 --seed 2 --out runs/kmac-rally\n  \
     rally plot runs/kmac runs/muscle --out curves.png\n\n\
     Writes OUT/checkpoint.json (the agents' checkpoint format: rally eval OUT/checkpoint.json),\n\
     OUT/curve.csv, OUT/curve.png and OUT/resume/ (what --resume reads).")]
@@ -26,9 +27,14 @@ pub struct TrainArgs {
     /// The method: kmac (Diff-Muscle), muscle (Muscle-PPO), muscle-pd or dynsyn.
     #[arg(long, value_parser = parse_method)]
     method: Method,
-    /// The environment: single (single serves); rally (the dual arena) is not trainable yet.
-    #[arg(long, default_value = "single", value_parser = ["single", "rally"])]
-    env: String,
+    /// The environment: single (single serves) or rally (the dual arena, the policy on both robots);
+    /// default: the configuration's `env` (config/train.toml: single).
+    #[arg(long, value_parser = parse_env)]
+    env: Option<TrainEnv>,
+    /// Start from the weights and observation statistics of the run in this directory (a warm start,
+    /// e.g. --env rally --init runs/kmac); the optimiser and the counters start fresh.
+    #[arg(long, conflicts_with = "resume")]
+    init: Option<PathBuf>,
     /// Control steps to simulate in all (every environment's steps count), e.g. 2000000 or 2e6.
     #[arg(long, value_parser = parse_steps)]
     steps: u64,
@@ -54,6 +60,14 @@ pub struct TrainArgs {
 
 fn parse_method(s: &str) -> Result<Method, String> {
     s.parse()
+}
+
+fn parse_env(s: &str) -> Result<TrainEnv, String> {
+    match s {
+        "single" => Ok(TrainEnv::Single),
+        "rally" => Ok(TrainEnv::Rally),
+        _ => Err(format!("'{s}': the environments are single and rally")),
+    }
 }
 
 /// Parses a positive step count, plain or in e-notation (clap value parser).
@@ -98,9 +112,13 @@ pub fn git_commit() -> String {
     }
 }
 
-fn status_line(r: &CurveRow, steps_per_s: f64) -> String {
+fn status_line(r: &CurveRow, steps_per_s: f64, env: TrainEnv) -> String {
+    let rally = match env {
+        TrainEnv::Single => String::new(),
+        TrainEnv::Rally => format!("  rally {:.2}  in box {:.2}", r.rally_length, r.dual),
+    };
     format!(
-        "{:>7.0} steps/s  reward {:>7.1}  hit {:>5.1}%  success {:>5.1}%  lr {:.1e}  kl {:.4}",
+        "{:>7.0} steps/s  reward {:>7.1}  hit {:>5.1}%  success {:>5.1}%{rally}  lr {:.1e}  kl {:.4}",
         steps_per_s,
         r.reward,
         100.0 * r.hit_rate,
@@ -140,17 +158,14 @@ fn save(
 
 /// Runs `rally train`.
 pub fn run(args: &TrainArgs) -> Result<(), CliError> {
-    if args.env == "rally" {
-        return Err(CliError::Usage(
-            "--env rally: training in the dual arena is not implemented yet (single serves only)"
-                .into(),
-        ));
-    }
     let model = super::default_model()?;
-    let config = match &args.config {
+    let mut config = match &args.config {
         Some(p) => read_config(p)?,
         None => TrainConfig::default(),
     };
+    if let Some(env) = args.env {
+        config.env = env;
+    }
     let dir = RunDir::open(&args.out).map_err(|e| CliError::Usage(format!("--out: {e}")))?;
     let mut trainer = if args.resume {
         let state = dir
@@ -164,6 +179,14 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
                 state.seed,
                 args.method.name(),
                 args.seed
+            )));
+        }
+        if let Some(env) = args.env.filter(|&e| e != state.config.env) {
+            return Err(CliError::Usage(format!(
+                "--resume: {} was trained in the {} environment, not {}",
+                args.out.display(),
+                state.config.env.name(),
+                env.name()
             )));
         }
         if args.config.is_some() && state.config != config {
@@ -180,12 +203,21 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
                 args.out.display()
             )));
         }
-        Trainer::new(model, args.method, config, args.seed).map_err(|e| anyhow!(e))?
+        let mut t = Trainer::new(model, args.method, config, args.seed).map_err(|e| anyhow!(e))?;
+        if let Some(init) = &args.init {
+            RunDir::open(init)
+                .and_then(|d| d.warm_start(&mut t))
+                .map_err(|e| CliError::Usage(format!("--init: {e}")))?;
+        }
+        t
     };
     let name = args
         .name
         .clone()
-        .unwrap_or_else(|| args.method.checkpoint_name().to_string());
+        .unwrap_or_else(|| match trainer.config.env {
+            TrainEnv::Single => args.method.checkpoint_name().to_string(),
+            TrainEnv::Rally => format!("{}-rally", args.method.checkpoint_name()),
+        });
     let command = std::env::args()
         .map(|a| if a.contains(' ') { format!("'{a}'") } else { a })
         .collect::<Vec<_>>()
@@ -208,7 +240,7 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         let row = trainer.iterate().map_err(|e| anyhow!(e))?;
         let rate = (row.env_steps - first_steps) as f64 / started.elapsed().as_secs_f64();
         bar.set_position(row.env_steps.min(args.steps));
-        bar.set_message(status_line(&row, rate));
+        bar.set_message(status_line(&row, rate, trainer.config.env));
         let boundary = row.iteration.is_multiple_of(every);
         if boundary {
             save(&dir, &trainer, &name, &command, &commit, true)?;
@@ -217,7 +249,7 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
                     "iteration {} ({} steps): {}",
                     row.iteration,
                     row.env_steps,
-                    status_line(&row, rate)
+                    status_line(&row, rate, trainer.config.env)
                 );
             }
         }

@@ -177,6 +177,36 @@ pub enum TrainServe {
     Rally,
 }
 
+/// The training environment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainEnv {
+    /// The single-serve episode (paper §IV-B): one ball, one stroke.
+    #[default]
+    Single,
+    /// The dual-robot rally in self-play (paper §IV-C): the policy plays both robots; see
+    /// [`crate::env::RallyEnv`].
+    Rally,
+}
+
+impl TrainEnv {
+    /// Its name on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            TrainEnv::Single => "single",
+            TrainEnv::Rally => "rally",
+        }
+    }
+
+    /// Policies stepped per environment (one robot, or both).
+    pub fn agents(self) -> usize {
+        match self {
+            TrainEnv::Single => 1,
+            TrainEnv::Rally => 2,
+        }
+    }
+}
+
 /// The controllers' settings (the same for every run of a method).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -215,8 +245,10 @@ pub struct TrainConfig {
     pub reward: RewardWeights,
     /// Controllers.
     pub controller: ControllerConfig,
-    /// Training serves.
+    /// Training serves (single-serve environment; the rally serves its own).
     pub serve: TrainServe,
+    /// The environment.
+    pub env: TrainEnv,
 }
 
 impl TrainConfig {

@@ -159,19 +159,23 @@ impl RunDir {
         Ok(state)
     }
 
-    /// Rebuilds the trainer from the saved state.
-    pub fn load(&self, model: Arc<Model>) -> Result<Trainer, String> {
-        let state = self.read_state()?;
-        let dir = self.state_dir().expect("read_state found it");
+    /// The saved state's tensors.
+    fn read_tensors(&self) -> Result<(PathBuf, HashMap<String, Tensor>), String> {
+        let dir = self
+            .state_dir()
+            .ok_or_else(|| format!("{}: no resumable state (resume/)", self.dir.display()))?;
         let path = dir.join("tensors.safetensors");
         let tensors =
             candle_core::safetensors::load(&path, &Device::Cpu).map_err(|e| io(&path, e))?;
-        let mut t = Trainer::new(model, state.method, state.config.clone(), state.seed)?;
-        let take = |name: &str| -> Result<&Tensor, String> {
-            tensors
-                .get(name)
-                .ok_or_else(|| io(&path, format!("no tensor '{name}'")))
-        };
+        Ok((path, tensors))
+    }
+
+    /// Sets the trainer's network (actor, critic, log σ) to the saved one, shape by shape.
+    fn set_net(
+        t: &mut Trainer,
+        path: &Path,
+        tensors: &HashMap<String, Tensor>,
+    ) -> Result<(), String> {
         for (name, var) in t
             .net
             .named()
@@ -179,10 +183,12 @@ impl RunDir {
             .map(|(n, _)| n.clone())
             .zip(t.net.vars())
         {
-            let saved = take(&name)?;
+            let saved = tensors
+                .get(&name)
+                .ok_or_else(|| io(path, format!("no tensor '{name}'")))?;
             if saved.dims() != var.dims() {
                 return Err(io(
-                    &path,
+                    path,
                     format!(
                         "'{name}' has shape {:?}, expected {:?}",
                         saved.dims(),
@@ -190,12 +196,27 @@ impl RunDir {
                     ),
                 ));
             }
-            var.set(saved).map_err(|e| io(&path, e))?;
+            var.set(saved).map_err(|e| io(path, e))?;
         }
+        Ok(())
+    }
+
+    /// Rebuilds the trainer from the saved state.
+    pub fn load(&self, model: Arc<Model>) -> Result<Trainer, String> {
+        let state = self.read_state()?;
+        let (path, tensors) = self.read_tensors()?;
+        let mut t = Trainer::new(model, state.method, state.config.clone(), state.seed)?;
+        Self::set_net(&mut t, &path, &tensors)?;
         let mut adam = Adam::new(t.net.vars(), state.learning_rate).map_err(|e| io(&path, e))?;
         for k in 0..adam.m.len() {
-            adam.m[k] = take(&format!("adam.m.{k}"))?.clone();
-            adam.v[k] = take(&format!("adam.v.{k}"))?.clone();
+            let take = |name: String| {
+                tensors
+                    .get(&name)
+                    .cloned()
+                    .ok_or_else(|| io(&path, format!("no tensor '{name}'")))
+            };
+            adam.m[k] = take(format!("adam.m.{k}"))?;
+            adam.v[k] = take(format!("adam.v.{k}"))?;
         }
         adam.t = state.adam_steps;
         t.adam = adam;
@@ -204,14 +225,46 @@ impl RunDir {
         Ok(t)
     }
 
+    /// Starts the fresh run `t` from this run's policy, critic and observation statistics (a warm
+    /// start): the method must be the same; the optimiser, counters and curve stay fresh.
+    pub fn warm_start(&self, t: &mut Trainer) -> Result<(), String> {
+        let state = self.read_state()?;
+        if state.method != t.method {
+            return Err(format!(
+                "{} holds a {} run, not {}",
+                self.dir.display(),
+                state.method.name(),
+                t.method.name()
+            ));
+        }
+        if state.normalizer.mean.len() != t.obs_dim() {
+            return Err(format!(
+                "{}: observations of {} entries, this run has {}",
+                self.dir.display(),
+                state.normalizer.mean.len(),
+                t.obs_dim()
+            ));
+        }
+        let (path, tensors) = self.read_tensors()?;
+        Self::set_net(t, &path, &tensors)?;
+        t.normalizer = state.normalizer;
+        t.progress.warm_start = Some(format!(
+            "{} ({} steps, iteration {})",
+            self.dir.display(),
+            state.progress.env_steps,
+            state.progress.iteration
+        ));
+        Ok(())
+    }
+
     /// Rewrites `curve.csv` from the rows.
     pub fn write_curve(&self, rows: &[CurveRow]) -> Result<(), String> {
         let mut out = String::from(
-            "iteration,env_steps,wall_s,episodes,reward,length,hit_rate,success_rate,mean_activation,tracking,learning_rate,kl,value_loss,surrogate_loss,entropy,std\n",
+            "iteration,env_steps,wall_s,episodes,reward,length,hit_rate,success_rate,mean_activation,tracking,learning_rate,kl,value_loss,surrogate_loss,entropy,std,rally_length,dual\n",
         );
         for r in rows {
             out.push_str(&format!(
-                "{},{},{:.3},{},{:.4},{:.2},{:.4},{:.4},{:.5},{:.5},{:.3e},{:.3e},{:.5},{:.5},{:.4},{:.4}\n",
+                "{},{},{:.3},{},{:.4},{:.2},{:.4},{:.4},{:.5},{:.5},{:.3e},{:.3e},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4}\n",
                 r.iteration,
                 r.env_steps,
                 r.wall_s,
@@ -227,7 +280,9 @@ impl RunDir {
                 r.value_loss,
                 r.surrogate_loss,
                 r.entropy,
-                r.std
+                r.std,
+                r.rally_length,
+                r.dual
             ));
         }
         write_atomic(&self.curve_path(), out.as_bytes())
@@ -258,6 +313,8 @@ pub fn read_curve(path: &Path) -> Result<Vec<CurveRow>, String> {
         col("hit_rate")?,
         col("success_rate")?,
     );
+    // Runs written before the rally environment have no rally_length column.
+    let cl = col("rally_length").ok();
     let mut rows = Vec::new();
     for (k, line) in lines.enumerate() {
         let f: Vec<&str> = line.split(',').collect();
@@ -277,6 +334,10 @@ pub fn read_curve(path: &Path) -> Result<Vec<CurveRow>, String> {
             reward: num(cr)?,
             hit_rate: num(ch)?,
             success_rate: num(cu)?,
+            rally_length: match cl {
+                Some(c) => num(c)?,
+                None => 0.0,
+            },
             ..CurveRow::default()
         });
     }

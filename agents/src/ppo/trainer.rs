@@ -25,10 +25,10 @@ use super::gae::{gae, normalise, StepEnd};
 use super::loss;
 use super::normalizer::RunningNormalizer;
 use super::policy::ActorCritic;
-use super::{stream_seed, Method, Schedule, TrainConfig, TrainServe};
+use super::{stream_seed, Method, Schedule, TrainConfig, TrainEnv, TrainServe};
 use crate::checkpoint::{Checkpoint, ObservationSpec, Training, TrainingPoint, FORMAT, VERSION};
 use crate::controller::ControllerSpec;
-use crate::env::{Env, EpisodeEnd, ObsBlock};
+use crate::env::{Env, EpisodeEnd, ObsBlock, RallyEnv};
 
 /// Episodes the rolling training statistics are taken over.
 pub const RECENT_EPISODES: usize = 200;
@@ -52,6 +52,12 @@ pub struct EpisodeStat {
     pub success: bool,
     /// Mean ‖a‖₁/n_a over its steps.
     pub mean_activation: f64,
+    /// Legal returns in the episode (a rally's, by both sides; a single serve's: 0 or 1).
+    #[serde(default)]
+    pub rally_length: u32,
+    /// Times the `dual` term was paid to this robot (its return crossed the other plane in the box).
+    #[serde(default)]
+    pub dual: f64,
 }
 
 /// One row of the learning curve: an iteration's losses and the rolling episode statistics after it.
@@ -90,6 +96,12 @@ pub struct CurveRow {
     pub entropy: f64,
     /// Mean policy σ.
     pub std: f64,
+    /// Mean legal returns per episode over the last episodes (a rally's length).
+    #[serde(default)]
+    pub rally_length: f64,
+    /// Mean times per episode the `dual` term was paid, over the last episodes.
+    #[serde(default)]
+    pub dual: f64,
 }
 
 /// Where the time of the run went, s (this process only).
@@ -120,19 +132,121 @@ pub struct Progress {
     pub recent: VecDeque<EpisodeStat>,
     /// One row per iteration.
     pub curve: Vec<CurveRow>,
+    /// The run directory this run's weights started from (a warm start), if any.
+    #[serde(default)]
+    pub warm_start: Option<String>,
+}
+
+/// A training environment: a single serve (one robot) or a self-play rally (two).
+enum TrainingEnv {
+    Single(Box<Env>),
+    Rally(Box<RallyEnv>),
+}
+
+/// What one robot's step gave.
+struct AgentStep {
+    reward: f64,
+    done: bool,
+    /// The episode reached its time limit (or cap) rather than a terminal state.
+    time_limit: bool,
+    hit: bool,
+    success: bool,
+    rally_length: u32,
+    dual: f64,
+    /// The position term, while the robot tracks a command before contact.
+    tracking: Option<f64>,
+    /// ‖a‖₁/n_a after the step.
+    activation: f64,
+}
+
+fn mean_activation(act: &[f64], muscles: &[usize]) -> f64 {
+    muscles.iter().map(|&m| act[m].abs()).sum::<f64>() / muscles.len().max(1) as f64
+}
+
+impl TrainingEnv {
+    fn reset(&mut self, seed: u64) {
+        match self {
+            TrainingEnv::Single(e) => {
+                e.reset(seed);
+            }
+            TrainingEnv::Rally(e) => e.reset(seed),
+        }
+    }
+
+    fn observe_into(&self, out: &mut Vec<f64>) {
+        match self {
+            TrainingEnv::Single(e) => out.extend_from_slice(e.observation()),
+            TrainingEnv::Rally(e) => {
+                out.extend_from_slice(e.observation(0));
+                out.extend_from_slice(e.observation(1));
+            }
+        }
+    }
+
+    /// One control step with the rows of `actions` (one per robot).
+    fn step(&mut self, actions: &[Vec<f64>], muscles: &[usize]) -> Vec<AgentStep> {
+        match self {
+            TrainingEnv::Single(env) => {
+                let tr = env.step(&actions[0]);
+                let tracking =
+                    (!tr.hit && env.observer.command().is_some()).then_some(tr.terms.position);
+                let time_limit = tr.done
+                    && env.episode.referee.end().is_none()
+                    && !tr.success
+                    && env.episode.steps >= env.episode.max_steps;
+                vec![AgentStep {
+                    reward: tr.reward,
+                    done: tr.done,
+                    time_limit,
+                    hit: tr.hit,
+                    success: tr.success,
+                    rally_length: tr.success as u32,
+                    dual: 0.0,
+                    tracking,
+                    activation: mean_activation(&env.episode.robot.state.act, muscles),
+                }]
+            }
+            TrainingEnv::Rally(env) => {
+                let trs = env.step([&actions[0], &actions[1]]);
+                let length = trs.iter().map(|t| t.returns).sum();
+                let capped = env.capped();
+                trs.iter()
+                    .enumerate()
+                    .map(|(i, t)| AgentStep {
+                        reward: t.step.reward,
+                        done: t.step.done,
+                        time_limit: t.step.done && capped,
+                        hit: t.step.hit,
+                        success: t.step.success,
+                        rally_length: length,
+                        dual: t.step.terms.dual,
+                        tracking: t.tracking,
+                        activation: mean_activation(&env.rally.arena.robots[i].state.act, muscles),
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// One robot's running episode.
+#[derive(Debug, Clone, Copy, Default)]
+struct Running {
+    reward: f64,
+    steps: u32,
+    activation: f64,
+    dual: f64,
 }
 
 /// An environment and its running episode.
 struct Slot {
-    env: Env,
+    env: TrainingEnv,
     /// Episodes begun in this segment.
     episode: u64,
-    reward: f64,
-    steps: u32,
-    activation: f64,
+    running: Vec<Running>,
 }
 
-/// What one environment's step gave the rollout.
+/// What one robot's step gave the rollout.
 struct StepOut {
     reward: f32,
     end: StepEnd,
@@ -164,32 +278,52 @@ pub struct Trainer {
     muscles: Vec<usize>,
     obs_dim: usize,
     act_dim: usize,
+    /// Robots per environment.
+    agents: usize,
 }
 
-/// The training environment a method runs in.
+/// The training environment a method runs in; its observation and action sizes.
 fn make_env(
     model: &Arc<Model>,
     controller: &ControllerSpec,
     config: &TrainConfig,
-) -> Result<Env, String> {
-    let kind = match config.serve {
-        TrainServe::P2 => ServeKind::P2,
-        TrainServe::Rally => ServeKind::Rally {
-            server: sim::arena::Side::B,
-        },
-    };
-    let mut env = Env::new(
-        model.clone(),
-        &ArenaConfig::default(),
-        sim::arena::MYOCHALLENGE,
-        controller,
-        ObsBlock::ALL.to_vec(),
-        config.reward,
-        kind,
-    )?;
-    env.end = EpisodeEnd::Training;
-    env.grip_floor = config.controller.grip_floor;
-    Ok(env)
+) -> Result<(TrainingEnv, usize, usize), String> {
+    match config.env {
+        TrainEnv::Single => {
+            let kind = match config.serve {
+                TrainServe::P2 => ServeKind::P2,
+                TrainServe::Rally => ServeKind::Rally {
+                    server: sim::arena::Side::B,
+                },
+            };
+            let mut env = Env::new(
+                model.clone(),
+                &ArenaConfig::default(),
+                sim::arena::MYOCHALLENGE,
+                controller,
+                ObsBlock::ALL.to_vec(),
+                config.reward,
+                kind,
+            )?;
+            env.end = EpisodeEnd::Training;
+            env.grip_floor = config.controller.grip_floor;
+            let dims = (env.obs_dim(), env.action_dim());
+            Ok((TrainingEnv::Single(Box::new(env)), dims.0, dims.1))
+        }
+        TrainEnv::Rally => {
+            let mut env = RallyEnv::new(
+                model.clone(),
+                &ArenaConfig::default(),
+                sim::arena::MYOCHALLENGE,
+                controller,
+                ObsBlock::ALL.to_vec(),
+                config.reward,
+            )?;
+            env.grip_floor = config.controller.grip_floor;
+            let dims = (env.obs_dim(), env.action_dim());
+            Ok((TrainingEnv::Rally(Box::new(env)), dims.0, dims.1))
+        }
+    }
 }
 
 fn e(err: candle_core::Error) -> String {
@@ -215,8 +349,8 @@ impl Trainer {
     ) -> Result<Trainer, String> {
         config.validate()?;
         let controller = config.controller(method, &model);
-        let probe = make_env(&model, &controller, &config)?;
-        let (obs_dim, act_dim) = (probe.obs_dim(), probe.action_dim());
+        let (_, obs_dim, act_dim) = make_env(&model, &controller, &config)?;
+        let agents = config.env.agents();
         let p = &config.ppo;
         let net = ActorCritic::new(
             obs_dim,
@@ -230,11 +364,9 @@ impl Trainer {
         let slots = (0..p.envs)
             .map(|_| {
                 Ok(Slot {
-                    env: make_env(&model, &controller, &config)?,
+                    env: make_env(&model, &controller, &config)?.0,
                     episode: 0,
-                    reward: 0.0,
-                    steps: 0,
-                    activation: 0.0,
+                    running: vec![Running::default(); agents],
                 })
             })
             .collect::<Result<Vec<_>, String>>()?;
@@ -252,12 +384,14 @@ impl Trainer {
                 episodes: 0,
                 recent: VecDeque::new(),
                 curve: Vec::new(),
+                warm_start: None,
             },
             timing: Timing::default(),
             slots,
             muscles: model.muscles().map(|(i, _)| i).collect(),
             obs_dim,
             act_dim,
+            agents,
             config,
         })
     }
@@ -279,18 +413,17 @@ impl Trainer {
             s.episode = 0;
             s.env
                 .reset(stream_seed(seed, STREAM_EPISODE, it, (k as u64) << 32));
-            s.reward = 0.0;
-            s.steps = 0;
-            s.activation = 0.0;
+            s.running.fill(Running::default());
         });
     }
 
-    /// Normalised observations of every environment, `[envs, obs]` row-major (f32).
+    /// Raw observations of every robot of every environment, `[envs·agents, obs]` row-major.
     fn observations(&self) -> Vec<f64> {
-        self.slots
-            .iter()
-            .flat_map(|s| s.env.observation().iter().copied())
-            .collect()
+        let mut out = Vec::with_capacity(self.slots.len() * self.agents * self.obs_dim);
+        for s in &self.slots {
+            s.env.observe_into(&mut out);
+        }
+        out
     }
 
     fn tensor(data: Vec<f32>, rows: usize, cols: usize) -> Result<Tensor, String> {
@@ -319,7 +452,14 @@ impl Trainer {
         {
             self.begin_segment();
         }
-        let (n_env, d, a_dim, t_len) = (p.envs, self.obs_dim, self.act_dim, p.steps_per_env);
+        // Rows: every robot of every environment (one per environment in the single serve).
+        let (n_env, d, a_dim, t_len) = (
+            p.envs * self.agents,
+            self.obs_dim,
+            self.act_dim,
+            p.steps_per_env,
+        );
+        let agents = self.agents;
         let n = n_env * t_len;
         let mut obs_buf: Vec<f32> = Vec::with_capacity(n * d);
         let mut act_buf: Vec<f32> = Vec::with_capacity(n * a_dim);
@@ -364,36 +504,47 @@ impl Trainer {
             let outs: Vec<StepOut> = self
                 .slots
                 .par_iter_mut()
-                .zip(actions.par_chunks(a_dim))
+                .zip(actions.par_chunks(a_dim * agents))
                 .enumerate()
-                .map(|(k, (slot, a))| {
-                    let action: Vec<f64> = a.iter().map(|&x| (x as f64).clamp(-1.0, 1.0)).collect();
-                    let tr = slot.env.step(&action);
-                    let act = &slot.env.episode.robot.state.act;
-                    slot.activation += muscles.iter().map(|&m| act[m].abs()).sum::<f64>()
-                        / muscles.len().max(1) as f64;
-                    slot.reward += tr.reward;
-                    slot.steps += 1;
-                    let tracking = (!tr.hit && slot.env.observer.command().is_some())
-                        .then_some(tr.terms.position);
-                    let end = if !tr.done {
-                        StepEnd::Running
-                    } else if slot.env.episode.referee.end().is_none()
-                        && !tr.success
-                        && slot.env.episode.steps >= slot.env.episode.max_steps
-                    {
-                        StepEnd::TimeLimit
-                    } else {
-                        StepEnd::Terminal
-                    };
-                    let finished = tr.done.then(|| EpisodeStat {
-                        reward: slot.reward,
-                        steps: slot.steps,
-                        hit: tr.hit,
-                        success: tr.success,
-                        mean_activation: slot.activation / slot.steps.max(1) as f64,
-                    });
-                    if tr.done {
+                .flat_map_iter(|(k, (slot, a))| {
+                    let rows: Vec<Vec<f64>> = a
+                        .chunks(a_dim)
+                        .map(|r| r.iter().map(|&x| (x as f64).clamp(-1.0, 1.0)).collect())
+                        .collect();
+                    let steps = slot.env.step(&rows, &muscles);
+                    let done = steps.iter().any(|s| s.done);
+                    let outs: Vec<StepOut> = steps
+                        .iter()
+                        .zip(slot.running.iter_mut())
+                        .map(|(st, run)| {
+                            run.activation += st.activation;
+                            run.reward += st.reward;
+                            run.dual += st.dual;
+                            run.steps += 1;
+                            let end = if !done {
+                                StepEnd::Running
+                            } else if st.time_limit {
+                                StepEnd::TimeLimit
+                            } else {
+                                StepEnd::Terminal
+                            };
+                            StepOut {
+                                reward: st.reward as f32 * scale,
+                                end,
+                                finished: done.then(|| EpisodeStat {
+                                    reward: run.reward,
+                                    steps: run.steps,
+                                    hit: st.hit,
+                                    success: st.success,
+                                    mean_activation: run.activation / run.steps.max(1) as f64,
+                                    rally_length: st.rally_length,
+                                    dual: run.dual,
+                                }),
+                                tracking: st.tracking,
+                            }
+                        })
+                        .collect();
+                    if done {
                         slot.episode += 1;
                         slot.env.reset(stream_seed(
                             seed,
@@ -401,16 +552,9 @@ impl Trainer {
                             segment_start,
                             ((k as u64) << 32) | slot.episode,
                         ));
-                        slot.reward = 0.0;
-                        slot.steps = 0;
-                        slot.activation = 0.0;
+                        slot.running.fill(Running::default());
                     }
-                    StepOut {
-                        reward: tr.reward as f32 * scale,
-                        end,
-                        finished,
-                        tracking,
-                    }
+                    outs
                 })
                 .collect();
             self.timing.simulation += t1.elapsed().as_secs_f64();
@@ -481,6 +625,8 @@ impl Trainer {
             surrogate_loss: losses.surrogate,
             entropy: losses.entropy,
             std: mean_of(std_now.iter().map(|&s| s as f64)),
+            rally_length: mean_of(recent.iter().map(|s| s.rally_length as f64)),
+            dual: mean_of(recent.iter().map(|s| s.dual)),
         };
         self.progress.curve.push(row);
         Ok(row)
@@ -634,6 +780,9 @@ impl Trainer {
                 success_rate: last.success_rate,
                 episodes: self.progress.recent.len() as u64,
                 curve,
+                env: self.config.env.name().into(),
+                warm_start: self.progress.warm_start.clone(),
+                rally_length: (self.config.env == TrainEnv::Rally).then_some(last.rally_length),
             }),
         })
     }
