@@ -51,3 +51,37 @@ fn bad_match_arguments_exit_2() {
         assert_eq!(out.status.code(), Some(2), "{args:?}");
     }
 }
+
+#[test]
+fn committed_checkpoints_play_by_name() {
+    let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args([
+            "match",
+            "kmac",
+            "scripted",
+            "--rallies",
+            "2",
+            "--seed",
+            "4",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["a"], "kmac");
+    let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["match", "no-such-agent", "scripted"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("config/checkpoints/no-such-agent.json"),
+        "{err}"
+    );
+}

@@ -196,6 +196,31 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     let (_, agents) = call(a, "GET", "/api/v1/agents", None, None);
     let builtins = agents["agents"].as_array().unwrap().len();
     assert!(builtins >= 3, "{agents}");
+    // Every committed checkpoint is a built-in agent beside the scripted ones, qualified.
+    let committed: Vec<String> = std::fs::read_dir("config/checkpoints")
+        .unwrap()
+        .filter_map(|e| {
+            let p = e.unwrap().path();
+            (p.extension()? == "json").then(|| p.file_stem().unwrap().to_string_lossy().into())
+        })
+        .collect();
+    assert!(committed.iter().any(|n| n == "kmac"), "{committed:?}");
+    for name in &committed {
+        let row = agents["agents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["name"] == name.as_str())
+            .unwrap_or_else(|| panic!("built-in checkpoint {name} missing: {agents}"));
+        assert_eq!(
+            (row["builtin"].as_bool(), row["kind"].as_str()),
+            (Some(true), Some("checkpoint")),
+            "{row}"
+        );
+        assert_eq!(row["qual_episodes"], 6, "{row}");
+        assert!(row["hit_rate"].as_f64().is_some() && row["effort"].as_f64().is_some());
+    }
+    assert_eq!(builtins, 3 + committed.len(), "{agents}");
 
     // Submit and qualify a checkpoint.
     let (code, sub) = call(
@@ -1162,10 +1187,11 @@ fn multipart(boundary: &str, fields: &[(&str, &str)], file: (&str, &str, &[u8]))
 #[test]
 fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     let dir = tempdir("contests");
+    // The three scripted built-ins only: the counts below are theirs.
     let srv = start_with(
         &dir,
         false,
-        "max_matches_per_minute = 8\nmax_agents_per_hour = 1\n",
+        "max_matches_per_minute = 8\nmax_agents_per_hour = 1\nbuiltin_checkpoints = \"\"\n",
     );
     let a = srv.addr.as_str();
     let (code, t) = call(
@@ -1647,4 +1673,39 @@ fn batch_submits_a_plan_follows_it_and_writes_csv() {
         ("scripted-drive", "scripted", "6")
     );
     assert_eq!(lines[3].split(',').nth(col("tournament_id")), Some("1"));
+}
+
+#[test]
+fn a_builtin_checkpoint_that_does_not_load_is_skipped_not_fatal() {
+    let dir = tempdir("builtins");
+    let ck = dir.join("checkpoints");
+    std::fs::create_dir_all(&ck).unwrap();
+    std::fs::copy("config/checkpoints/kmac.json", ck.join("house-kmac.json")).unwrap();
+    std::fs::write(
+        ck.join("broken.json"),
+        "{\"format\": \"muscle-rally-checkpoint\"",
+    )
+    .unwrap();
+    std::fs::write(ck.join("bad name!.json"), "{}").unwrap();
+    let extra = format!("builtin_checkpoints = \"{}\"\n", ck.display());
+    let names = |srv: &Server| -> Vec<String> {
+        let (_, agents) = call(&srv.addr, "GET", "/api/v1/agents", None, None);
+        agents["agents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x["name"].as_str().unwrap().to_string())
+            .collect()
+    };
+    let srv = start_with(&dir, false, &extra);
+    let first = names(&srv);
+    assert!(first.iter().any(|n| n == "house-kmac"), "{first:?}");
+    assert!(
+        !first.iter().any(|n| n == "broken" || n == "bad name!"),
+        "{first:?}"
+    );
+    drop(srv);
+    // A restart registers nothing twice.
+    let srv = start_with(&dir, false, &extra);
+    assert_eq!(names(&srv), first);
 }

@@ -52,6 +52,10 @@ impl Player for Scripted {
     }
 }
 
+/// Where the committed checkpoints live, relative to the repository root (`rally match kmac
+/// kmac-rally` finds `config/checkpoints/kmac.json` and `config/checkpoints/kmac-rally.json`).
+pub const COMMITTED_CHECKPOINTS: &str = "config/checkpoints";
+
 static PLAYERS_BUILT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Players built by [`PlayerSpec::build`] in this process so far (evaluations and matches build one
@@ -84,13 +88,18 @@ impl PlayerSpec {
         if let Some(s) = PlayerSpec::scripted(name) {
             return Ok(s);
         }
-        let text = read(name).map_err(|e| {
+        // A bare name is also a committed checkpoint's: config/checkpoints/NAME.json.
+        let committed = format!("{COMMITTED_CHECKPOINTS}/{name}.json");
+        let bare = !name.contains(['/', '\\']) && !name.ends_with(".json");
+        let text = read(name)
+            .or_else(|e| if bare { read(&committed).map_err(|_| e) } else { Err(e) })
+            .map_err(|e| {
             let names: Vec<&str> = crate::scripted::variants()
                 .iter()
                 .map(|(n, _)| *n)
                 .collect();
             format!(
-                "'{name}' is neither a scripted agent ({}) nor a readable checkpoint file: {e}",
+                "'{name}' is neither a scripted agent ({}), a committed checkpoint ({COMMITTED_CHECKPOINTS}/{name}.json) nor a readable checkpoint file: {e}",
                 names.join(", ")
             )
         })?;

@@ -43,3 +43,37 @@ fn committed_checkpoints_load_validate_and_play() {
     }
     assert!(seen >= 1, "no committed checkpoint in {dir}");
 }
+
+#[test]
+fn a_rally_match_between_committed_checkpoints_is_bit_identical_per_seed() {
+    let m = Arc::new(
+        sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"),
+    );
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/checkpoints");
+    let load = |name: &str| -> Option<agents::player::PlayerSpec> {
+        let text = std::fs::read_to_string(format!("{dir}/{name}.json")).ok()?;
+        let c = Checkpoint::from_json(&text, &m).expect("a committed checkpoint loads");
+        Some(agents::player::PlayerSpec::Checkpoint(Arc::new(c)))
+    };
+    // The rally-trained agent if it is committed, against the single-serve one.
+    let a = load("kmac-rally")
+        .or_else(|| load("kmac"))
+        .expect("kmac is committed");
+    let b = load("kmac").unwrap();
+    let spec = |seed| agents::matchrun::MatchSpec {
+        model: m.clone(),
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        rallies: 4,
+        seed,
+        replay: true,
+    };
+    let play = |seed| agents::matchrun::play_match(&spec(seed), &a, &b, &mut |_| {}).unwrap();
+    let (r1, p1) = play(31);
+    let (r2, p2) = play(31);
+    assert_eq!(r1, r2);
+    assert_eq!(p1, p2);
+    assert!(p1.iter().all(|frames| frames.len() > 10));
+    let (r3, _) = play(32);
+    assert_ne!(r1.rallies, r3.rallies, "another seed, another match");
+}

@@ -13,8 +13,10 @@ fn model() -> Arc<sim::model::Model> {
 }
 
 fn rally_config(envs: usize, steps: usize, every: usize) -> TrainConfig {
-    let mut c = TrainConfig::default();
-    c.env = TrainEnv::Rally;
+    let mut c = TrainConfig {
+        env: TrainEnv::Rally,
+        ..TrainConfig::default()
+    };
     c.ppo.envs = envs;
     c.ppo.steps_per_env = steps;
     c.ppo.checkpoint_every = every;
@@ -62,7 +64,10 @@ fn the_serve_box_term_is_paid_once_the_policy_returns_balls() {
     assert!(cold_n >= 20 && warm_n >= 20);
     // ~8 payments expected in ~90 episodes; at least 2 (a Poisson tail below 1% if the rate holds).
     let paid = (warm_dual * warm_n as f64).round();
-    assert!(paid >= 2.0, "the warm start earns the serve-box term ({paid} times)");
+    assert!(
+        paid >= 2.0,
+        "the warm start earns the serve-box term ({paid} times)"
+    );
     assert!(warm_dual > cold_dual, "{warm_dual} vs {cold_dual}");
     assert!(row.rally_length > 0.0 && (row.dual - warm_dual).abs() < 1e-12);
 }

@@ -402,27 +402,10 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
         })?;
     charge(&s, caller, Budget::Agents, 1)?;
     let spec = agents::player::PlayerSpec::Checkpoint(Arc::new(checkpoint));
-    let eval = agents::eval::Evaluation {
-        model: s.model.clone(),
-        config: s.arena.clone(),
-        preset: sim::arena::MYOCHALLENGE,
-        kind: sim::serve::ServeKind::P2,
-        episodes: s.settings.qualification_episodes,
-        seed: 0,
-    };
-    // One qualification at a time (each one already uses every core).
-    let _turn = s
-        .qualify
-        .acquire()
-        .await
-        .map_err(|e| anyhow::anyhow!("qualification queue closed: {e}"))?;
-    let report = tokio::task::spawn_blocking(move || agents::eval::evaluate(&eval, &spec, &|| {}))
-        .await
-        .map_err(|e| anyhow::anyhow!("qualification panicked: {e}"))?
-        .map_err(|e| ApiError {
-            field: Some("checkpoint"),
-            ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
-        })?;
+    let report = crate::qualify(&s, spec).await?.map_err(|e| ApiError {
+        field: Some("checkpoint"),
+        ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
+    })?;
     let qual = (
         report.episodes,
         report.hit_rate.value,
@@ -434,6 +417,7 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
         &body.name,
         &text,
         qual,
+        false,
         match caller {
             Caller::Admin => None,
             Caller::Submitter(id) => Some(id),

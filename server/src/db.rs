@@ -127,16 +127,17 @@ pub async fn agent_spec(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<(Stri
         .await
 }
 
-/// Inserts a submitted checkpoint agent with its qualification.
+/// Inserts a checkpoint agent (submitted, or built in) with its qualification.
 pub async fn insert_checkpoint_agent(
     pool: &SqlitePool,
     name: &str,
     spec: &str,
     qual: (usize, f64, f64, f64),
+    builtin: bool,
     submitted_by: Option<i64>,
 ) -> sqlx::Result<i64> {
     let r = sqlx::query(
-        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, submitted_by) VALUES (?, 'checkpoint', ?, ?, ?, ?, ?, ?, ?)",
+        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, builtin, submitted_by) VALUES (?, 'checkpoint', ?, ?, ?, ?, ?, ?, ?, ?)",
     )
     .bind(name)
     .bind(spec)
@@ -145,6 +146,7 @@ pub async fn insert_checkpoint_agent(
     .bind(qual.1)
     .bind(qual.2)
     .bind(qual.3)
+    .bind(builtin)
     .bind(submitted_by)
     .execute(pool)
     .await?;

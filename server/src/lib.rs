@@ -66,6 +66,14 @@ pub struct Settings {
     /// `qualification_episodes` episodes); the admin token is not limited.
     #[serde(default = "default_agents_per_hour")]
     pub max_agents_per_hour: u32,
+    /// Directory of checkpoints (`NAME.json`) registered as built-in agents on start, qualified like
+    /// submissions; empty: none. A file that does not load is skipped with a warning.
+    #[serde(default = "default_builtin_checkpoints")]
+    pub builtin_checkpoints: PathBuf,
+}
+
+fn default_builtin_checkpoints() -> PathBuf {
+    PathBuf::from("config/checkpoints")
 }
 
 fn default_agents_per_hour() -> u32 {
@@ -198,7 +206,100 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),
     };
     db::register_builtins(&state.pool).await?;
+    register_builtin_checkpoints(&state).await?;
     Ok(state)
+}
+
+/// Qualifies an agent on `qualification_episodes` P2 serves (seed 0), one qualification at a time
+/// (each one already uses every core). The outer error is the server's, the inner one the agent's.
+pub async fn qualify(
+    state: &AppState,
+    spec: agents::player::PlayerSpec,
+) -> anyhow::Result<Result<agents::eval::EvalReport, String>> {
+    let eval = agents::eval::Evaluation {
+        model: state.model.clone(),
+        config: state.arena.clone(),
+        preset: sim::arena::MYOCHALLENGE,
+        kind: sim::serve::ServeKind::P2,
+        episodes: state.settings.qualification_episodes,
+        seed: 0,
+    };
+    let _turn = state
+        .qualify
+        .acquire()
+        .await
+        .map_err(|e| anyhow::anyhow!("qualification queue closed: {e}"))?;
+    tokio::task::spawn_blocking(move || agents::eval::evaluate(&eval, &spec, &|| {}))
+        .await
+        .map_err(|e| anyhow::anyhow!("qualification panicked: {e}"))
+}
+
+/// Registers every checkpoint in `settings.builtin_checkpoints` that is not an agent yet, as a
+/// built-in agent named after its file, qualified like a submission. A checkpoint that does not
+/// load or qualify is skipped with a warning (the committed ones are held to loading by a test);
+/// a name already taken keeps its agent.
+async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
+    let dir = &state.settings.builtin_checkpoints;
+    if dir.as_os_str().is_empty() {
+        return Ok(());
+    }
+    let mut files: Vec<PathBuf> = match std::fs::read_dir(dir) {
+        Ok(entries) => entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "json"))
+            .collect(),
+        Err(e) => {
+            tracing::warn!(dir = %dir.display(), "no built-in checkpoints: {e}");
+            return Ok(());
+        }
+    };
+    files.sort();
+    for path in files {
+        let Some(name) = path.file_stem().map(|s| s.to_string_lossy().to_string()) else {
+            continue;
+        };
+        if let Err(e) = api::check_name(&name) {
+            tracing::warn!(path = %path.display(), "built-in checkpoint skipped: {e}");
+            continue;
+        }
+        if let Some(existing) = db::agent_by_name(&state.pool, &name).await? {
+            if !existing.builtin {
+                tracing::warn!(%name, "a submitted agent holds the name of a built-in checkpoint; keeping it");
+            }
+            continue;
+        }
+        let loaded = std::fs::read_to_string(&path)
+            .map_err(|e| e.to_string())
+            .and_then(|text| {
+                agents::checkpoint::Checkpoint::from_json(&text, &state.model)
+                    .map(|c| (text, c))
+                    .map_err(|e| e.to_string())
+            });
+        let (text, checkpoint) = match loaded {
+            Ok(x) => x,
+            Err(e) => {
+                tracing::warn!(path = %path.display(), "built-in checkpoint skipped: {e}");
+                continue;
+            }
+        };
+        let spec = agents::player::PlayerSpec::Checkpoint(Arc::new(checkpoint));
+        let report = match qualify(state, spec).await? {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::warn!(%name, "built-in checkpoint did not qualify: {e}");
+                continue;
+            }
+        };
+        let qual = (
+            report.episodes,
+            report.hit_rate.value,
+            report.success_rate.value,
+            report.effort.value,
+        );
+        db::insert_checkpoint_agent(&state.pool, &name, &text, qual, true, None).await?;
+        tracing::info!(%name, hit = qual.1, success = qual.2, "built-in checkpoint registered");
+    }
+    Ok(())
 }
 
 async fn shutdown_signal() {

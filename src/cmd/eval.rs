@@ -11,7 +11,7 @@ use super::{parse_preset, CliError};
 /// Arguments of `rally eval`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Agents: scripted, scripted-drive, scripted-soft, or a checkpoint file (rally train writes OUT/checkpoint.json).\n\n\
+    after_help = "Agents: scripted, scripted-drive, scripted-soft, a committed checkpoint by name (kmac, muscle-ppo, …: config/checkpoints/NAME.json)\nor a checkpoint file (rally train writes OUT/checkpoint.json).\n\n\
                   Example:\n  rally eval scripted --episodes 200 --seed 1 --serve p2"
 )]
 pub struct EvalArgs {

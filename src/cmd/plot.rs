@@ -140,6 +140,140 @@ pub fn learning_curves(series: &[Series], out: &Path) -> Result<(), String> {
     root.present().map_err(|e| e.to_string())
 }
 
+/// Draws the distribution of rally lengths of each series (fraction of rallies with each number of
+/// returns, lengths above `max_len` in the last bin) into `out`.
+pub fn rally_histogram(
+    series: &[(String, Vec<u32>)],
+    max_len: u32,
+    out: &Path,
+) -> Result<(), String> {
+    font()?;
+    let root = BitMapBackend::new(out, (900, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let bins = max_len as usize + 1;
+    let fractions: Vec<Vec<f64>> = series
+        .iter()
+        .map(|(_, lengths)| {
+            let mut h = vec![0.0; bins];
+            for &l in lengths {
+                h[(l as usize).min(bins - 1)] += 1.0 / lengths.len().max(1) as f64;
+            }
+            h
+        })
+        .collect();
+    let top = fractions
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, &b| a.max(b))
+        .max(0.05)
+        * 1.1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("rally length (legal returns per rally)", ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(52)
+        .build_cartesian_2d(-0.5..bins as f64 - 0.5, 0.0..top)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc(format!("returns ({max_len}: {max_len} or more)"))
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_desc("fraction of rallies")
+        .label_style(("sans-serif", 13))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    let width = 0.8 / series.len().max(1) as f64;
+    for (k, ((label, _), h)) in series.iter().zip(&fractions).enumerate() {
+        let colour = COLOURS[k % COLOURS.len()];
+        let x0 = -0.4 + k as f64 * width;
+        chart
+            .draw_series(h.iter().enumerate().map(|(i, &f)| {
+                let x = i as f64 + x0;
+                Rectangle::new([(x, 0.0), (x + width, f)], colour.filled())
+            }))
+            .map_err(|e| e.to_string())?
+            .label(label.clone())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())
+}
+
+/// One panel of the return-distribution figure: the serves' and the returns' crossings `(y_r, z)`
+/// of the receiver's hitting plane.
+pub struct Crossings {
+    /// Panel title.
+    pub title: String,
+    /// Serves (exchange 0).
+    pub serves: Vec<(f64, f64)>,
+    /// Returns (exchange ≥ 1).
+    pub returns: Vec<(f64, f64)>,
+}
+
+/// Draws the paper's return-distribution figure: per panel, the serves and the returns where they
+/// cross the receiver's hitting plane, with the serve box.
+pub fn return_distribution(panels: &[Crossings], out: &Path) -> Result<(), String> {
+    font()?;
+    let n = panels.len().max(1);
+    let root = BitMapBackend::new(out, (450 * n as u32, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let (bz0, bz1) = sim::arena::SERVE_BOX_Z;
+    let by = sim::arena::SERVE_BOX_HALF_WIDTH;
+    for (area, p) in root.split_evenly((1, n)).iter().zip(panels) {
+        let mut chart = ChartBuilder::on(area)
+            .caption(&p.title, ("sans-serif", 17))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(46)
+            .build_cartesian_2d(-1.5..1.5, 0.6..1.9)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("y at the hitting plane, receiver's frame (m)")
+            .y_desc("z (m)")
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(-by, bz0), (by, bz1)],
+                BLACK.stroke_width(2),
+            )))
+            .map_err(|e| e.to_string())?
+            .label("serve box")
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], BLACK.stroke_width(2)));
+        for (pts, label, colour) in [
+            (&p.serves, "serves", COLOURS[0]),
+            (&p.returns, "returns", COLOURS[1]),
+        ] {
+            chart
+                .draw_series(
+                    pts.iter()
+                        .map(|&(y, z)| Circle::new((y, z), 2, colour.mix(0.6).filled())),
+                )
+                .map_err(|e| e.to_string())?
+                .label(format!("{label} ({})", pts.len()))
+                .legend(move |(x, y)| Circle::new((x + 6, y), 4, colour.filled()));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 12))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
 /// Arguments of `rally plot`.
 #[derive(Args, Debug)]
 #[command(

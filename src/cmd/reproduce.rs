@@ -33,7 +33,8 @@ pub fn paper_row(m: Method) -> (f64, f64, f64) {
 /// Arguments of `rally reproduce`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  rally reproduce --episodes 1000 --seed 2026   (writes docs/reproduce.md and docs/reproduce_curves.png)"
+    after_help = "Example:\n  rally reproduce --episodes 1000 --seed 2026 --rallies 200\n  \
+                  (writes docs/reproduce.md, docs/reproduce_curves.png, docs/reproduce_rallies.png, docs/reproduce_returns.png)"
 )]
 pub struct ReproduceArgs {
     /// Episodes per agent.
@@ -48,6 +49,163 @@ pub struct ReproduceArgs {
     /// The report to write (the learning-curve PNG goes beside it).
     #[arg(long, default_value = "docs/reproduce.md")]
     out: PathBuf,
+    /// Rallies per pairing in the dual-rally section (match seed: --seed); 0 skips the section.
+    #[arg(long, default_value = "200")]
+    rallies: u32,
+}
+
+/// The dual-rally pairings: the rally-trained agent against itself and the scripted agent, and the
+/// single-serve agent and the scripted agent against themselves for reference.
+const PAIRINGS: [(&str, &str); 4] = [
+    ("kmac-rally", "kmac-rally"),
+    ("kmac-rally", "scripted"),
+    ("kmac", "kmac"),
+    ("scripted", "scripted"),
+];
+
+/// Longest rally the histogram bins one by one.
+const HISTOGRAM_MAX: u32 = 20;
+
+/// One pairing's match, or why it was not played.
+struct Pairing {
+    a: String,
+    b: String,
+    record: Result<agents::matchrun::MatchRecord, String>,
+}
+
+fn play_pairings(args: &ReproduceArgs, model: &std::sync::Arc<sim::model::Model>) -> Vec<Pairing> {
+    let spec = agents::matchrun::MatchSpec {
+        model: model.clone(),
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        rallies: args.rallies,
+        seed: args.seed,
+        replay: false,
+    };
+    let bar = ProgressBar::new(PAIRINGS.len() as u64 * args.rallies as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} rallies, eta {eta}  {msg}")
+            .expect("valid template"),
+    );
+    let resolve = |name: &str| -> Result<PlayerSpec, String> {
+        match PlayerSpec::scripted(name) {
+            Some(s) => Ok(s),
+            None => {
+                let path = args.checkpoints.join(format!("{name}.json"));
+                let text = std::fs::read_to_string(&path)
+                    .map_err(|_| format!("not trained yet (no {})", path.display()))?;
+                Checkpoint::from_json(&text, model)
+                    .map(|c| PlayerSpec::Checkpoint(std::sync::Arc::new(c)))
+                    .map_err(|e| format!("{}: {e}", path.display()))
+            }
+        }
+    };
+    let out = PAIRINGS
+        .iter()
+        .map(|&(a, b)| {
+            bar.set_message(format!("{a} vs {b}"));
+            let record = resolve(a).and_then(|pa| {
+                let pb = resolve(b)?;
+                agents::matchrun::play_match(&spec, &pa, &pb, &mut |_| bar.inc(1)).map(|r| r.0)
+            });
+            Pairing {
+                a: a.into(),
+                b: b.into(),
+                record,
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
+    out
+}
+
+/// Fraction of crossings inside the serve box by exchange index (0 = the serves), with counts.
+fn in_box_by_exchange(m: &agents::matchrun::MatchRecord) -> Vec<(u32, usize, f64)> {
+    let all: Vec<_> = m.rallies.iter().flat_map(|r| r.crossings.iter()).collect();
+    let max = all.iter().map(|c| c.exchange).max().unwrap_or(0);
+    (0..=max)
+        .filter_map(|k| {
+            let at: Vec<_> = all.iter().filter(|c| c.exchange == k).collect();
+            (!at.is_empty()).then(|| {
+                let inside = at.iter().filter(|c| c.in_box).count();
+                (k, at.len(), inside as f64 / at.len() as f64)
+            })
+        })
+        .collect()
+}
+
+fn rally_section(
+    args: &ReproduceArgs,
+    pairings: &[Pairing],
+    hist: Option<&str>,
+    returns: Option<&str>,
+) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "\n## Dual-robot rallies (paper §IV-C, §V-D)\n");
+    let _ = writeln!(
+        s,
+        "`rally match A B --rallies {} --seed {}` for each pairing (A serves the even rallies, B the odd ones; \
+         the heuristic rally serve). A rally's length is its legal returns (the serve is not one). A geometric \
+         rally with per-stroke success p has mean p/(1−p): the column *implied p* inverts that. The drift slope is \
+         the least-squares slope over exchange index of the energy distance between the serves' and the returns' \
+         crossings of the receiver's hitting plane (DESIGN §7). The paper's record: 14 consecutive exchanges.\n",
+        args.rallies, args.seed
+    );
+    let _ = writeln!(
+        s,
+        "| A | B | Mean rally | Longest | Implied p | In box (all crossings) | Drift slope | Ends |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    for p in pairings {
+        match &p.record {
+            Ok(m) => {
+                let mut ends = std::collections::BTreeMap::<&str, usize>::new();
+                for r in &m.rallies {
+                    *ends.entry(r.end).or_default() += 1;
+                }
+                let ends: Vec<String> = ends.iter().map(|(k, n)| format!("{k} {n}")).collect();
+                let l = m.mean_rally_length;
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {:.2} | {} | {:.3} | {:.1}% | {} | {} |",
+                    p.a,
+                    p.b,
+                    l,
+                    m.max_rally_length,
+                    l / (1.0 + l),
+                    100.0 * m.drift.in_box_fraction,
+                    m.drift
+                        .drift_slope
+                        .map_or("–".into(), |x| format!("{x:.4}")),
+                    ends.join(", ")
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(s, "| {} | {} | {e} | | | | | |", p.a, p.b);
+            }
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\nIn-box fraction by exchange index (0 = the serves; crossings counted):\n"
+    );
+    for p in pairings {
+        if let Ok(m) = &p.record {
+            let cells: Vec<String> = in_box_by_exchange(m)
+                .iter()
+                .take(12)
+                .map(|(k, n, f)| format!("{k}: {:.0}% ({n})", 100.0 * f))
+                .collect();
+            let _ = writeln!(s, "- {} vs {}: {}", p.a, p.b, cells.join(", "));
+        }
+    }
+    if let Some(h) = hist {
+        let _ = writeln!(s, "\n![rally lengths]({h})\n");
+    }
+    if let Some(r) = returns {
+        let _ = writeln!(s, "![serves and returns at the hitting plane]({r})\n");
+    }
+    s
 }
 
 /// Who plays in the report: the method it stands for, its label, how to build it, its checkpoint.
@@ -173,7 +331,62 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
     if plotted {
         learning_curves(&series, &curves_png).map_err(|e| CliError::Failed(anyhow!(e)))?;
     }
-    let md = report(args, &rows, plotted.then_some(&curves_png));
+    let mut md = report(args, &rows, plotted.then_some(&curves_png));
+    if args.rallies > 0 {
+        let pairings = play_pairings(args, &model);
+        let played: Vec<&Pairing> = pairings.iter().filter(|p| p.record.is_ok()).collect();
+        let file = |suffix: &str| args.out.with_file_name(format!("reproduce_{suffix}.png"));
+        let name = |p: &std::path::Path| p.file_name().map(|n| n.to_string_lossy().to_string());
+        let (hist, ret) = (file("rallies"), file("returns"));
+        let mut hist_name = None;
+        let mut ret_name = None;
+        if !played.is_empty() {
+            let series: Vec<(String, Vec<u32>)> = played
+                .iter()
+                .map(|p| {
+                    let m = p.record.as_ref().expect("played");
+                    (
+                        format!("{} vs {}", p.a, p.b),
+                        m.rallies.iter().map(|r| r.length).collect(),
+                    )
+                })
+                .collect();
+            super::plot::rally_histogram(&series, HISTOGRAM_MAX, &hist)
+                .map_err(|e| CliError::Failed(anyhow!(e)))?;
+            hist_name = name(&hist);
+            let panels: Vec<super::plot::Crossings> = played
+                .iter()
+                .filter(|p| p.a.starts_with("kmac-rally"))
+                .map(|p| {
+                    let m = p.record.as_ref().expect("played");
+                    let pick = |ret: bool| {
+                        m.rallies
+                            .iter()
+                            .flat_map(|r| r.crossings.iter())
+                            .filter(|c| (c.exchange > 0) == ret)
+                            .map(|c| (c.y_r, c.z))
+                            .collect()
+                    };
+                    super::plot::Crossings {
+                        title: format!("{} vs {}", p.a, p.b),
+                        serves: pick(false),
+                        returns: pick(true),
+                    }
+                })
+                .collect();
+            if !panels.is_empty() {
+                super::plot::return_distribution(&panels, &ret)
+                    .map_err(|e| CliError::Failed(anyhow!(e)))?;
+                ret_name = name(&ret);
+            }
+        }
+        md.push_str(&rally_section(
+            args,
+            &pairings,
+            hist_name.as_deref(),
+            ret_name.as_deref(),
+        ));
+    }
     std::fs::write(&args.out, &md)?;
     print!("{md}");
     eprintln!("wrote {}", args.out.display());
@@ -185,12 +398,13 @@ fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf>) -> Strin
     let _ = writeln!(s, "# Reproducing the paper's Table I\n");
     let _ = writeln!(
         s,
-        "Written by `rally reproduce --episodes {} --seed {}` (simulator {}). Every agent plays the same {} \
+        "Written by `rally reproduce --episodes {} --seed {} --rallies {}` (simulator {}). Every agent plays the same {} \
          MyoChallenge P2 serves in the single-serve environment: episode i uses the serve and agent seeds \
          `episode_seeds({}, i)`, i = 0…{}; training serves come from separate streams of each run's training \
          seed, so no evaluation serve was trained on. Rates are Wilson 95% intervals, means normal 95% intervals.\n",
         args.episodes,
         args.seed,
+        args.rallies,
         sim::SIM_VERSION,
         args.episodes,
         args.seed,
