@@ -23,8 +23,9 @@ pub struct EvalArgs {
     /// Evaluation seed (each episode derives its own serve and agent seeds from it).
     #[arg(long, default_value = "0")]
     seed: u64,
-    /// MyoChallenge serve distribution.
-    #[arg(long, default_value = "p2", value_parser = ["p1", "p2"])]
+    /// Serve distribution: MyoChallenge p1 or p2, or the paper's heuristic rally serve (from the
+    /// other robot's hitting plane, as a rally starts).
+    #[arg(long, default_value = "p2", value_parser = ["p1", "p2", "rally"])]
     serve: String,
     /// Arena preset.
     #[arg(long, default_value = "myochallenge", value_parser = parse_preset)]
@@ -86,11 +87,7 @@ pub fn run(args: &EvalArgs) -> Result<(), CliError> {
         spec = mean_action(spec);
     }
     let config = sim::config::ArenaConfig::default();
-    let kind = if args.serve == "p1" {
-        ServeKind::P1
-    } else {
-        ServeKind::P2
-    };
+    let kind = ServeKind::parse(&args.serve).expect("clap checked the serve's name");
     let bar = ProgressBar::new(args.episodes);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} episodes, {per_sec}, eta {eta}")

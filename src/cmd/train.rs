@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use agents::ppo::store::{write_atomic, RunDir};
 use agents::ppo::trainer::{CurveRow, Trainer};
-use agents::ppo::{Method, TrainConfig, TrainEnv};
+use agents::ppo::{Method, TrainConfig, TrainEnv, TrainServe};
 use anyhow::anyhow;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -31,6 +31,10 @@ pub struct TrainArgs {
     /// default: the configuration's `env` (config/train.toml: single).
     #[arg(long, value_parser = parse_env)]
     env: Option<TrainEnv>,
+    /// Training serves of the single-serve environment: p2 (MyoChallenge P2) or rally (the paper's
+    /// heuristic rally serve, the official code's training serve); default: the configuration's.
+    #[arg(long, value_parser = parse_serve)]
+    serve: Option<TrainServe>,
     /// Start from the weights and observation statistics of the run in this directory (a warm start,
     /// e.g. --env rally --init runs/kmac); the optimiser and the counters start fresh.
     #[arg(long, conflicts_with = "resume")]
@@ -60,6 +64,14 @@ pub struct TrainArgs {
 
 fn parse_method(s: &str) -> Result<Method, String> {
     s.parse()
+}
+
+fn parse_serve(s: &str) -> Result<TrainServe, String> {
+    match s {
+        "p2" => Ok(TrainServe::P2),
+        "rally" => Ok(TrainServe::Rally),
+        _ => Err(format!("'{s}': the training serves are p2 and rally")),
+    }
 }
 
 fn parse_env(s: &str) -> Result<TrainEnv, String> {
@@ -166,6 +178,9 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
     if let Some(env) = args.env {
         config.env = env;
     }
+    if let Some(serve) = args.serve {
+        config.serve = serve;
+    }
     let dir = RunDir::open(&args.out).map_err(|e| CliError::Usage(format!("--out: {e}")))?;
     let mut trainer = if args.resume {
         let state = dir
@@ -187,6 +202,13 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
                 args.out.display(),
                 state.config.env.name(),
                 env.name()
+            )));
+        }
+        if let Some(serve) = args.serve.filter(|&s| s != state.config.serve) {
+            return Err(CliError::Usage(format!(
+                "--resume: {} was trained on {:?} serves, not {serve:?}",
+                args.out.display(),
+                state.config.serve
             )));
         }
         if args.config.is_some() && state.config != config {
