@@ -164,14 +164,7 @@ pub fn muscle_pd_control(
     let bias = muscle::bias(p, l, lr, 0.0);
     let act_star = ((f_star - bias) / gain).clamp(0.0, 1.0);
     let tau = match actuator.dynamics {
-        Dynamics::Muscle(d) => {
-            let a0 = act.clamp(0.0, 1.0);
-            if act_star > act {
-                d.tau_act * (0.5 + 1.5 * a0)
-            } else {
-                d.tau_deact / (0.5 + 1.5 * a0)
-            }
-        }
+        Dynamics::Muscle(d) => muscle::time_constant(act_star, act, &d),
         Dynamics::None => return act_star,
     };
     (act + (act_star - act) * tau / dt).clamp(0.0, 1.0)
@@ -332,7 +325,7 @@ impl Synergies {
         model.apply_couplings(&mut q);
         // Random joint-velocity drive: every 0.1 s a new velocity within the joint ranges' scale.
         let steps = 600;
-        let h = 0.01;
+        let h = sim::arena::CONTROL_DT;
         let mut samples = vec![Vec::with_capacity(steps); m];
         let mut vel = vec![0.0; space.joints.len()];
         for k in 0..steps {

@@ -187,6 +187,12 @@ impl ActivationParams {
 /// `d act / dt` (`mju_muscleDynamics`): `(u − act)/τ` with `τ = τ_act·(0.5 + 1.5·act)` when
 /// activating and `τ_deact/(0.5 + 1.5·act)` when not, control and activation clamped to [0, 1] for τ.
 pub fn activation_rate(ctrl: f64, act: f64, p: &ActivationParams) -> f64 {
+    (ctrl.clamp(0.0, 1.0) - act) / time_constant(ctrl, act, p)
+}
+
+/// The time constant τ of [`activation_rate`] for control `ctrl` at activation `act`, s (at least
+/// `MINVAL`): the one place its formula is written (K-MAC inverts the dynamics with it).
+pub fn time_constant(ctrl: f64, act: f64, p: &ActivationParams) -> f64 {
     let u = ctrl.clamp(0.0, 1.0);
     let a = act.clamp(0.0, 1.0);
     let tau_act = p.tau_act * (0.5 + 1.5 * a);
@@ -201,7 +207,7 @@ pub fn activation_rate(ctrl: f64, act: f64, p: &ActivationParams) -> f64 {
     } else {
         tau_deact + (tau_act - tau_deact) * sigmoid(d / p.smoothing + 0.5)
     };
-    d / tau.max(MINVAL)
+    tau.max(MINVAL)
 }
 
 /// MuJoCo's `mju_sigmoid`: quintic smoothstep on [0, 1].
