@@ -1,5 +1,6 @@
 //! PPO end to end on the real single-serve environment: a short run shows a learning signal, a run
-//! is a function of its seed, a run saved and resumed is the same run bit for bit, and the shipped
+//! is a function of its seed, a run saved and resumed is the same run bit for bit (in the rally
+//! environment too), and the shipped
 //! `config/train.toml` is the compiled-in default.
 
 use std::sync::Arc;
@@ -87,41 +88,51 @@ fn a_short_kmac_run_learns_a_signal() {
 
 #[test]
 fn a_resumed_run_is_the_same_run_bit_for_bit() {
-    let cfg = small(4, 8, 2);
-    let m = model();
-    let mut straight = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 11).unwrap();
-    for _ in 0..4 {
-        straight.iterate().unwrap();
-    }
-    let dir = std::env::temp_dir().join(format!("rally-ppo-resume-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let run = RunDir::open(&dir).unwrap();
-    let mut first = Trainer::new(m.clone(), Method::Kmac, cfg, 11).unwrap();
-    for _ in 0..2 {
+    // In both environments: single serves, and the self-play rally (two robots per environment).
+    let mut rally = small(3, 24, 2);
+    rally.env = agents::ppo::TrainEnv::Rally;
+    rally.ppo.hidden = vec![16, 16];
+    for cfg in [small(4, 8, 2), rally] {
+        let m = model();
+        let mut straight = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 11).unwrap();
+        for _ in 0..4 {
+            straight.iterate().unwrap();
+        }
+        let dir = std::env::temp_dir().join(format!(
+            "rally-ppo-resume-{}-{}",
+            cfg.env.name(),
+            std::process::id()
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+        let run = RunDir::open(&dir).unwrap();
+        let mut first = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 11).unwrap();
+        for _ in 0..2 {
+            first.iterate().unwrap();
+        }
+        run.save_state(&first).unwrap();
+        // A third iteration that is lost, as if killed before the next checkpoint.
         first.iterate().unwrap();
+        drop(first);
+        let mut resumed = run.load(m).unwrap();
+        assert_eq!(resumed.progress.iteration, 2);
+        assert_eq!(resumed.config, cfg);
+        for _ in 0..2 {
+            resumed.iterate().unwrap();
+        }
+        assert_eq!(weights(&resumed), weights(&straight), "{}", cfg.env.name());
+        assert_eq!(resumed.adam.lr.to_bits(), straight.adam.lr.to_bits());
+        assert_eq!(resumed.normalizer, straight.normalizer);
+        let strip = |rows: &[agents::ppo::trainer::CurveRow]| -> Vec<(u64, u64, u64)> {
+            rows.iter()
+                .map(|r| (r.iteration, r.episodes, r.value_loss.to_bits()))
+                .collect()
+        };
+        assert_eq!(
+            strip(&resumed.progress.curve),
+            strip(&straight.progress.curve)
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
-    run.save_state(&first).unwrap();
-    // A third iteration that is lost, as if killed before the next checkpoint.
-    first.iterate().unwrap();
-    drop(first);
-    let mut resumed = run.load(m).unwrap();
-    assert_eq!(resumed.progress.iteration, 2);
-    for _ in 0..2 {
-        resumed.iterate().unwrap();
-    }
-    assert_eq!(weights(&resumed), weights(&straight));
-    assert_eq!(resumed.adam.lr.to_bits(), straight.adam.lr.to_bits());
-    assert_eq!(resumed.normalizer, straight.normalizer);
-    let strip = |rows: &[agents::ppo::trainer::CurveRow]| -> Vec<(u64, u64, u64)> {
-        rows.iter()
-            .map(|r| (r.iteration, r.episodes, r.value_loss.to_bits()))
-            .collect()
-    };
-    assert_eq!(
-        strip(&resumed.progress.curve),
-        strip(&straight.progress.curve)
-    );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
