@@ -2,8 +2,8 @@
 //!
 //! Physics only: the ball world (flight, table, net and paddle contacts), the rules of a legal
 //! return, ballistic prediction and the serve generators; the musculoskeletal robot (MJCF loader,
-//! kinematics, rigid-body dynamics, MuJoCo's muscles, the grip) and the dual arena. The episode and
-//! rally state machines come with issue 4.
+//! kinematics, rigid-body dynamics, MuJoCo's muscles, the grip), the dual arena, and the episodes
+//! played on them ([`episode`]: a single serve, a rally).
 //!
 //! **Must never**: do I/O, spawn threads, read the clock, or draw a random number the caller did not
 //! seed. Same inputs give bit-identical outputs. Policies, rewards and observations live in `agents`.
@@ -14,7 +14,8 @@
 //! and [`serve`] (serve generators on a portable ChaCha RNG); for the robot [`mjcf`] (loader) →
 //! [`model`] (immutable description) → [`kinematics`] (frames, tendons) → [`dynamics`] (mass matrix,
 //! bias, actuation, Euler step) with [`muscle`] (MuJoCo's curves), then [`robot`] (grip, side frame),
-//! [`dual`] (two robots and the ball) and [`config`] (`config/arena.toml`).
+//! [`dual`] (two robots and the ball), [`episode`] (the single-serve and rally state machines) and
+//! [`config`] (`config/arena.toml`).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
