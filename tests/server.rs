@@ -219,6 +219,19 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         );
         assert_eq!(row["qual_episodes"], 6, "{row}");
         assert!(row["hit_rate"].as_f64().is_some() && row["effort"].as_f64().is_some());
+        // Its page shows the learning curve the checkpoint carries.
+        let (_, one) = call(
+            a,
+            "GET",
+            &format!("/api/v1/agents/{}", row["id"]),
+            None,
+            None,
+        );
+        assert!(
+            !one["training"]["curve"].as_array().unwrap().is_empty(),
+            "{name}: no curve"
+        );
+        assert_eq!(one["rally_lengths"], json!([]));
     }
     assert_eq!(builtins, 3 + committed.len(), "{agents}");
 
@@ -366,6 +379,12 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     let (code, board) = call(a, "GET", "/api/v1/leaderboard", None, None);
     assert_eq!(code, 200);
     assert_eq!(board["matches"], 2);
+    // The agent page's data: its rally lengths, and no training provenance (a template).
+    let (_, got) = call(a, "GET", &format!("/api/v1/agents/{cid}"), None, None);
+    let lengths = got["rally_lengths"].as_array().unwrap();
+    let total: i64 = lengths.iter().map(|r| r["rallies"].as_i64().unwrap()).sum();
+    assert_eq!(total, 4, "{got}");
+    assert!(got["training"].is_null(), "{got}");
     let rows = board["rows"].as_array().unwrap();
     assert_eq!(rows.len(), builtins + 2);
     for r in rows {

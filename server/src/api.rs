@@ -215,6 +215,18 @@ async fn get_agent(State(s): State<AppState>, Path(id): Path<String>) -> ApiResu
         .ok_or_else(|| ApiError::not_found("agent", id))?;
     let mut v = json!(a);
     v["drift"] = json!(db::agent_drift_summary(&s.pool, id).await?);
+    v["rally_lengths"] = json!(db::agent_rally_lengths(&s.pool, id)
+        .await?
+        .into_iter()
+        .map(|(length, rallies)| json!({"length": length, "rallies": rallies}))
+        .collect::<Vec<_>>());
+    // A trained checkpoint's provenance and learning curve, as the checkpoint carries them.
+    v["training"] = match db::agent_spec(&s.pool, id).await? {
+        Some((kind, spec)) if kind == "checkpoint" => {
+            serde_json::from_str::<Value>(&spec).map_or(Value::Null, |c| c["training"].clone())
+        }
+        _ => Value::Null,
+    };
     Ok(Json(v))
 }
 

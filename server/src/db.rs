@@ -613,6 +613,19 @@ pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<
     .await
 }
 
+/// How many of the rallies of an agent's finished matches had each length: `(length, rallies)`,
+/// by length.
+pub async fn agent_rally_lengths(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<(i64, i64)>> {
+    sqlx::query_as(
+        "SELECT r.length, COUNT(*) FROM rallies r JOIN matches m ON m.id = r.match_id \
+         WHERE m.status = 'done' AND (m.agent_a = ? OR m.agent_b = ?) GROUP BY r.length ORDER BY r.length",
+    )
+    .bind(agent)
+    .bind(agent)
+    .fetch_all(pool)
+    .await
+}
+
 /// A crossing of the hitting plane that an agent is answerable for.
 #[derive(Debug, Clone, Serialize, FromRow)]
 pub struct AgentCrossing {
