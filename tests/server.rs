@@ -1728,3 +1728,61 @@ fn a_builtin_checkpoint_that_does_not_load_is_skipped_not_fatal() {
     let srv = start_with(&dir, false, &extra);
     assert_eq!(names(&srv), first);
 }
+
+#[test]
+fn the_event_stream_tells_a_match_queued_running_and_done() {
+    let dir = tempdir("events");
+    let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    // Subscribe first (a raw HTTP/1.1 stream), then queue a match.
+    let mut sub = TcpStream::connect(a).unwrap();
+    sub.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    write!(
+        sub,
+        "GET /api/v1/events HTTP/1.1\r\nHost: {a}\r\nAccept: text/event-stream\r\n\r\n"
+    )
+    .unwrap();
+    let mut reader = BufReader::new(sub);
+    let mut head = String::new();
+    while reader.read_line(&mut head).unwrap() > 2 && !head.ends_with("\r\n\r\n") {}
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    assert!(
+        head.to_ascii_lowercase().contains("text/event-stream"),
+        "{head}"
+    );
+    let (code, m) = call(
+        a,
+        "POST",
+        "/api/v1/matches",
+        Some(&json!({"a": "scripted", "b": "scripted-soft", "rallies": 2, "seed": 3})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 202, "{m}");
+    let id = m["id"].as_i64().unwrap();
+    let mut seen = Vec::new();
+    let started = Instant::now();
+    while !seen.contains(&"done".to_string()) {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "events so far: {seen:?}"
+        );
+        let mut line = String::new();
+        reader.read_line(&mut line).unwrap();
+        // Chunked framing lines and keep-alives are skipped; data lines carry the JSON.
+        if let Some(data) = line.trim().strip_prefix("data:") {
+            let e: Value = serde_json::from_str(data.trim()).unwrap();
+            if e["kind"] == "match" && e["id"] == id {
+                seen.push(e["status"].as_str().unwrap().to_string());
+            }
+        }
+    }
+    // A worker may claim the match before the queueing request has published it: the order of
+    // "queued" and "running" is not promised, "done" comes last.
+    let mut sorted = seen.clone();
+    sorted.sort();
+    assert_eq!(sorted, ["done", "queued", "running"], "{seen:?}");
+    assert_eq!(seen.last().unwrap(), "done");
+    // And the match is stored as done when the event says so.
+    let (_, got) = call(a, "GET", &format!("/api/v1/matches/{id}"), None, None);
+    assert_eq!(got["status"], "done");
+}

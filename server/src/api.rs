@@ -177,6 +177,7 @@ pub fn router(state: AppState) -> Router {
         .route("/sprt", get(list_sprts).post(create_sprt))
         .route("/sprt/{id}", get(get_sprt).delete(cancel_sprt))
         .route("/leaderboard", get(leaderboard))
+        .route("/events", get(events))
         .route("/tokens", axum::routing::post(issue_token))
         .route("/metrics", get(metrics))
         .route("/openapi.json", get(openapi))
@@ -206,6 +207,29 @@ async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {
 
 async fn list_agents(State(s): State<AppState>) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "agents": db::agents(&s.pool).await? })))
+}
+
+/// `GET /events`: server-sent events, one JSON `ServerEvent` per change (matches queued, started,
+/// finished, failed, cancelled; agents registered), with a keep-alive comment every 15 s. A
+/// subscriber that falls more than `EVENT_BUFFER` events behind gets an event `lagged` (refresh
+/// everything) and goes on from the newest; the publishers never wait for it.
+async fn events(
+    State(s): State<AppState>,
+) -> axum::response::sse::Sse<
+    impl futures_util::Stream<Item = Result<axum::response::sse::Event, std::convert::Infallible>>,
+> {
+    use axum::response::sse::{Event, KeepAlive, Sse};
+    use tokio::sync::broadcast::error::RecvError;
+    let rx = s.events.subscribe();
+    let stream = futures_util::stream::unfold(rx, |mut rx| async move {
+        let event = match rx.recv().await {
+            Ok(e) => Event::default().json_data(&e).unwrap_or_default(),
+            Err(RecvError::Lagged(n)) => Event::default().event("lagged").data(n.to_string()),
+            Err(RecvError::Closed) => return None,
+        };
+        Some((Ok(event), rx))
+    });
+    Sse::new(stream).keep_alive(KeepAlive::new().interval(std::time::Duration::from_secs(15)))
 }
 
 async fn get_agent(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Json<Value>> {
@@ -444,6 +468,7 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
         Err(e) => return Err(e.into()),
     };
     tracing::info!(id, name = %body.name, hit = qual.1, success = qual.2, "agent submitted");
+    s.publish("agent", id, None);
     let agent = db::agent(&s.pool, id).await?;
     Ok((
         StatusCode::CREATED,
@@ -619,6 +644,7 @@ async fn queue_match(
         ..db::Origin::default()
     };
     let id = db::queue_match(&s.pool, &a, &b, q.rallies, seed, true, origin).await?;
+    s.publish("match", id, Some("queued"));
     s.wake.notify_one();
     let m = db::match_row(&s.pool, id).await?;
     Ok((
@@ -699,6 +725,7 @@ async fn cancel_match(
             m.status
         )));
     }
+    s.publish("match", id, Some("cancelled"));
     Ok(Json(json!(db::match_row(&s.pool, id).await?)))
 }
 

@@ -117,6 +117,30 @@ impl Settings {
     }
 }
 
+/// What changed on the server, as `GET /api/v1/events` streams it (server-sent events): a match
+/// queued, started, finished, failed or cancelled, or an agent registered.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ServerEvent {
+    /// "match" or "agent".
+    pub kind: &'static str,
+    /// The match's or the agent's id.
+    pub id: i64,
+    /// A match's new status ("queued", "running", "done", "failed", "cancelled"); none for agents.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub status: Option<&'static str>,
+}
+
+/// Events kept for a slow subscriber before it starts missing some (it is told, and refreshes).
+pub const EVENT_BUFFER: usize = 256;
+
+impl AppState {
+    /// Publishes an event to every subscriber; never waits (a subscriber that lags loses the oldest
+    /// events, not the sender's time), and having no subscriber is fine.
+    pub fn publish(&self, kind: &'static str, id: i64, status: Option<&'static str>) {
+        let _ = self.events.send(ServerEvent { kind, id, status });
+    }
+}
+
 /// A leaderboard with the agent count and finished-match count it was computed from.
 pub type CachedBoard = (usize, i64, Arc<ratings::Leaderboard>);
 
@@ -139,6 +163,8 @@ pub struct AppState {
     pub rate: Arc<std::sync::Mutex<RateLog>>,
     /// One qualification at a time: submissions wait their turn instead of piling up on the CPU.
     pub qualify: Arc<tokio::sync::Semaphore>,
+    /// What changed, for the event stream's subscribers.
+    pub events: tokio::sync::broadcast::Sender<ServerEvent>,
     /// Replays of matches that kept no frames are re-simulated, as many at a time as there are workers.
     pub resim: Arc<tokio::sync::Semaphore>,
 }
@@ -203,6 +229,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         board: Arc::new(tokio::sync::Mutex::new(None)),
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
         qualify: Arc::new(tokio::sync::Semaphore::new(1)),
+        events: tokio::sync::broadcast::channel(EVENT_BUFFER).0,
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),
     };
     db::register_builtins(&state.pool).await?;
@@ -296,7 +323,8 @@ async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
             report.success_rate.value,
             report.effort.value,
         );
-        db::insert_checkpoint_agent(&state.pool, &name, &text, qual, true, None).await?;
+        let id = db::insert_checkpoint_agent(&state.pool, &name, &text, qual, true, None).await?;
+        state.publish("agent", id, None);
         tracing::info!(%name, hit = qual.1, success = qual.2, "built-in checkpoint registered");
     }
     Ok(())

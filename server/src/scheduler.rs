@@ -136,6 +136,9 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
                     Err(e) => return Err(e.into()),
                 }
             };
+            if stored {
+                state.publish("match", id, Some("done"));
+            }
             tracing::info!(
                 id,
                 points_a = record.points[0],
@@ -148,11 +151,13 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
         Ok(Err(e)) => {
             tracing::warn!(id, error = %e, "match failed");
             db::fail(&state.pool, id, &e).await?;
+            state.publish("match", id, Some("failed"));
         }
         Err(join) => {
             let e = format!("match worker panicked: {join}");
             tracing::error!(id, error = %e);
             db::fail(&state.pool, id, &e).await?;
+            state.publish("match", id, Some("failed"));
         }
     }
     Ok(())
@@ -252,6 +257,7 @@ pub fn spawn_workers(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandle<(
                     let claimed = db::claim(&state.pool).await;
                     match claimed {
                         Ok(Some(m)) => {
+                            state.publish("match", m.id, Some("running"));
                             if let Err(e) = run_one(&state, m).await {
                                 tracing::error!(worker = w, error = %e, "storing a match failed");
                             }
