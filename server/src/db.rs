@@ -170,6 +170,9 @@ pub struct Match {
     pub preset: String,
     /// Simulator version.
     pub sim_version: String,
+    /// Played (or queued) under another simulator version than this server's: its result stands,
+    /// but it cannot be re-simulated or played here.
+    pub outdated: bool,
     /// Hash of A's spec when queued.
     pub spec_hash_a: String,
     /// Hash of B's spec when queued.
@@ -208,7 +211,14 @@ pub struct Match {
     pub created_by: Option<i64>,
 }
 
-const MATCH_COLUMNS: &str = "id, agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by";
+/// The columns of a [`Match`]; `outdated` compares the stored simulator version with this build's
+/// (a constant of ours, digits and dots only).
+fn match_columns() -> String {
+    format!(
+        "id, agent_a, agent_b, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by",
+        sim::SIM_VERSION
+    )
+}
 
 #[cfg(test)]
 impl Match {
@@ -222,6 +232,7 @@ impl Match {
             seed: id,
             preset: "myochallenge".into(),
             sim_version: String::new(),
+            outdated: false,
             spec_hash_a: String::new(),
             spec_hash_b: String::new(),
             keep_replay: true,
@@ -287,10 +298,13 @@ pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
 
 /// One match.
 pub async fn match_row(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Match>> {
-    sqlx::query_as(&format!("SELECT {MATCH_COLUMNS} FROM matches WHERE id = ?"))
-        .bind(id)
-        .fetch_optional(pool)
-        .await
+    sqlx::query_as(&format!(
+        "SELECT {} FROM matches WHERE id = ?",
+        match_columns()
+    ))
+    .bind(id)
+    .fetch_optional(pool)
+    .await
 }
 
 /// Which matches to list.
@@ -311,7 +325,8 @@ pub async fn matches(
     limit: i64,
 ) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {MATCH_COLUMNS} FROM matches WHERE (?1 IS NULL OR agent_a = ?1 OR agent_b = ?1) AND (?2 IS NULL OR status = ?2) AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4"
+        "SELECT {cols} FROM matches WHERE (?1 IS NULL OR agent_a = ?1 OR agent_b = ?1) AND (?2 IS NULL OR status = ?2) AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4",
+        cols = match_columns()
     ))
     .bind(filter.agent)
     .bind(filter.status)
@@ -327,7 +342,8 @@ pub async fn claim(pool: &SqlitePool) -> sqlx::Result<Option<Match>> {
     sqlx::query_as(&format!(
         "UPDATE matches SET status = 'running', started_at = CURRENT_TIMESTAMP \
          WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1) AND status = 'queued' \
-         RETURNING {MATCH_COLUMNS}"
+         RETURNING {cols}",
+        cols = match_columns()
     ))
     .fetch_optional(pool)
     .await
@@ -805,7 +821,8 @@ pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tour
 /// A tournament's matches in the order they were queued.
 pub async fn tournament_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {MATCH_COLUMNS} FROM matches WHERE tournament_id = ? ORDER BY id"
+        "SELECT {cols} FROM matches WHERE tournament_id = ? ORDER BY id",
+        cols = match_columns()
     ))
     .bind(id)
     .fetch_all(pool)
@@ -933,7 +950,8 @@ pub async fn sprts(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
 /// An SPRT's matches in order.
 pub async fn sprt_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {MATCH_COLUMNS} FROM matches WHERE sprt_id = ? ORDER BY id"
+        "SELECT {cols} FROM matches WHERE sprt_id = ? ORDER BY id",
+        cols = match_columns()
     ))
     .bind(id)
     .fetch_all(pool)
@@ -1032,4 +1050,43 @@ async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<(
     )
     .await?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn a_match_of_another_simulator_version_says_it_is_outdated() {
+        let path =
+            std::env::temp_dir().join(format!("rally-db-outdated-{}.db", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let pool = open(&path).await.unwrap();
+        register_builtins(&pool).await.unwrap();
+        let all = agents(&pool).await.unwrap();
+        let (a, b) = (&all[0], &all[1]);
+        let now = queue_match(&pool, a, b, 2, 1, true, Origin::default())
+            .await
+            .unwrap();
+        let old = queue_match(&pool, a, b, 2, 2, true, Origin::default())
+            .await
+            .unwrap();
+        sqlx::query("UPDATE matches SET sim_version = '0.1.0' WHERE id = ?")
+            .bind(old)
+            .execute(&pool)
+            .await
+            .unwrap();
+        let row = |id| {
+            let pool = pool.clone();
+            async move { match_row(&pool, id).await.unwrap().unwrap() }
+        };
+        assert!(!row(now).await.outdated);
+        let m = row(old).await;
+        assert!(m.outdated && m.sim_version == "0.1.0");
+        // The list says so too.
+        let listed = matches(&pool, MatchFilter::default(), 10).await.unwrap();
+        assert_eq!(listed.iter().filter(|m| m.outdated).count(), 1);
+        pool.close().await;
+        let _ = std::fs::remove_file(&path);
+    }
 }
