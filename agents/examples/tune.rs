@@ -2,7 +2,7 @@
 //! `cargo run --release -p agents --example tune -- kp=40 kd=3 lead=0.03` (a tuning aid; the
 //! defaults it starts from are `ScriptedParams::default()`).
 use agents::eval::{evaluate, Evaluation};
-use agents::player::PlayerSpec;
+use agents::factory::PlayerSpec;
 use agents::scripted::ScriptedParams;
 use sim::serve::ServeKind;
 use std::sync::Arc;

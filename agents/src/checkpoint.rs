@@ -11,7 +11,7 @@ use sim::model::Model;
 use sim::robot::Robot;
 
 use crate::controller::{ActionMapper, ActionSpace, ControllerSpec};
-use crate::env::{ObsBlock, Observer};
+use crate::observation::{ObsBlock, Observer};
 use crate::player::{InvalidAction, Player};
 
 /// The format tag every checkpoint carries.
@@ -152,7 +152,7 @@ pub struct Checkpoint {
     /// differ a lot — muscles only pull, so the noise itself stiffens the arm.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub policy_std: Option<Vec<f64>>,
-    /// Least control of the grip muscles (default none; see `env::apply_grip_floor`).
+    /// Least control of the grip muscles (default none; see `controller::apply_grip_floor`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grip_floor: Option<f64>,
     /// How it was trained, if `rally train` made it.
@@ -648,7 +648,7 @@ impl Player for CheckpointPlayer {
         let model = robot.held_model().clone();
         self.mapper
             .controls(&model, &robot.state, &action, sim::arena::CONTROL_DT, ctrl);
-        crate::env::apply_grip_floor(robot, self.checkpoint.grip_floor.unwrap_or(0.0), ctrl);
+        crate::controller::apply_grip_floor(robot, self.checkpoint.grip_floor.unwrap_or(0.0), ctrl);
         Ok(())
     }
 }

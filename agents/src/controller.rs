@@ -731,3 +731,16 @@ impl ActionMapper {
         }
     }
 }
+
+/// Keeps the grip muscles' controls at `floor` or above, whatever the controller asked: a trained
+/// checkpoint's `grip_floor` (the house agent does the same with its `grip_activation`). Our grip
+/// holds by the squeeze of three flexors; a policy trained with exploration noise gets that squeeze
+/// from the noise itself (muscles only pull, so jittered targets co-contract), and its noise-free
+/// mean action then lets the paddle slip — the floor keeps evaluation what training saw.
+pub fn apply_grip_floor(robot: &sim::robot::Robot, floor: f64, ctrl: &mut [f64]) {
+    if floor > 0.0 {
+        for &m in robot.grip_muscles() {
+            ctrl[m] = ctrl[m].max(floor);
+        }
+    }
+}

@@ -14,7 +14,9 @@ use sim::model::Model;
 use sim::rng::Rng;
 use sim::serve::ServeKind;
 
-use crate::player::{Player, PlayerSpec};
+use crate::factory::PlayerSpec;
+use crate::player::Player;
+use crate::seeds::episode_seeds;
 
 /// One episode's outcome.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -119,18 +121,6 @@ pub struct EvalReport {
     pub mean_activation: Mean,
     /// How many episodes ended each way.
     pub ends: Vec<(String, usize)>,
-}
-
-/// The serve seed and the agent seed of episode `i` of an evaluation with `seed` (SplitMix64-style
-/// mixing, so neighbouring episodes get unrelated streams).
-pub fn episode_seeds(seed: u64, i: usize) -> (u64, u64) {
-    let mix = |mut z: u64| {
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    };
-    let base = mix(seed ^ mix(i as u64 + 0x9e37_79b9_7f4a_7c15));
-    (base, mix(base.wrapping_add(1)))
 }
 
 /// Plays one single-serve episode with `player`.
@@ -298,12 +288,5 @@ mod tests {
         let r = wilson(0, 20);
         assert_eq!(r.low, 0.0);
         assert!((r.high - 0.1611).abs() < 1e-3);
-    }
-
-    #[test]
-    fn episode_seeds_differ_and_repeat() {
-        assert_eq!(episode_seeds(7, 3), episode_seeds(7, 3));
-        assert_ne!(episode_seeds(7, 3), episode_seeds(7, 4));
-        assert_ne!(episode_seeds(7, 3), episode_seeds(8, 3));
     }
 }

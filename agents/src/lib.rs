@@ -2,8 +2,14 @@
 //!
 //! The physics-based planner ([`planner`], on `sim::predict`), K-MAC and the baselines
 //! ([`controller`]: joint targets or muscle lengths or raw controls → muscle controls), inverse
-//! kinematics for the paddle ([`ik`]), the scripted house agent ([`scripted`]), and (to come in this
-//! issue) the RL environment wrapper, checkpoints, PPO, evaluation and the match runner.
+//! kinematics for the paddle ([`ik`]), the scripted house agent ([`scripted`]), what a policy sees
+//! ([`observation`]), the RL environments ([`env`]), checkpoints ([`checkpoint`]), who plays
+//! ([`player`]: the trait; [`factory`]: building one from a name or a checkpoint), PPO ([`ppo`]),
+//! evaluation ([`eval`]), the match runner ([`matchrun`]) and the seeds they share ([`seeds`]).
+//!
+//! Modules import each other in one direction only: `seeds`, `planner`, `ik` and `controller` on
+//! `sim`; `observation` on those; `player` on `sim`; `checkpoint` and `scripted` on those;
+//! `factory` on `checkpoint` and `scripted`; `env`, `eval`, `matchrun` and `ppo` on top.
 //!
 //! Must never: speak HTTP or SQL (that is `server`), or change the physics (that is `sim`).
 //! Depends on `sim` only.
@@ -13,12 +19,15 @@ pub mod checkpoint;
 pub mod controller;
 pub mod env;
 pub mod eval;
+pub mod factory;
 pub mod ik;
 pub mod matchrun;
+pub mod observation;
 pub mod planner;
 pub mod player;
 pub mod ppo;
 pub mod scripted;
+pub mod seeds;
 
 /// The simulator this crate drives, re-exported so that callers name one version of it.
 pub use sim;

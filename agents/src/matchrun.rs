@@ -12,8 +12,9 @@ use sim::episode::{Crossing, Rally};
 use sim::model::Model;
 use sim::rng::Rng;
 
-use crate::eval::episode_seeds;
-use crate::player::{Player, PlayerSpec};
+use crate::factory::PlayerSpec;
+use crate::player::Player;
+use crate::seeds::episode_seeds;
 
 /// Replay frames per second (every second control step).
 pub const REPLAY_HZ: usize = 50;

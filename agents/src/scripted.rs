@@ -371,3 +371,24 @@ pub fn variants() -> Vec<(&'static str, ScriptedParams)> {
         ),
     ]
 }
+
+impl crate::player::Player for Scripted {
+    fn reset(&mut self) {
+        Scripted::reset(self);
+    }
+
+    fn reseed(&mut self, seed: u64) {
+        Scripted::reseed(self, seed);
+    }
+
+    fn act(
+        &mut self,
+        robot: &Robot,
+        ball: &BallState,
+        t: f64,
+        ctrl: &mut [f64],
+    ) -> Result<(), crate::player::InvalidAction> {
+        Scripted::act(self, robot, ball, t, ctrl);
+        Ok(())
+    }
+}

@@ -5,9 +5,10 @@ use std::sync::Arc;
 
 use agents::checkpoint::{Activation, Checkpoint, MAX_PARAMETERS};
 use agents::controller::{ControllerSpec, PdGains, Synergies};
-use agents::env::{Env, ObsBlock, RewardWeights};
+use agents::env::{Env, RewardWeights};
 use agents::eval::{evaluate, Evaluation};
-use agents::player::PlayerSpec;
+use agents::factory::PlayerSpec;
+use agents::observation::ObsBlock;
 use sim::model::Model;
 use sim::serve::ServeKind;
 

@@ -37,7 +37,7 @@ fn committed_checkpoints_load_validate_and_play() {
             episodes: 4,
             seed: 99,
         };
-        let spec = agents::player::PlayerSpec::Checkpoint(Arc::new(c));
+        let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(c));
         agents::eval::evaluate(&e, &spec, &|| {}).unwrap();
         seen += 1;
     }
@@ -50,10 +50,10 @@ fn a_rally_match_between_committed_checkpoints_is_bit_identical_per_seed() {
         sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"),
     );
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/checkpoints");
-    let load = |name: &str| -> Option<agents::player::PlayerSpec> {
+    let load = |name: &str| -> Option<agents::factory::PlayerSpec> {
         let text = std::fs::read_to_string(format!("{dir}/{name}.json")).ok()?;
         let c = Checkpoint::from_json(&text, &m).expect("a committed checkpoint loads");
-        Some(agents::player::PlayerSpec::Checkpoint(Arc::new(c)))
+        Some(agents::factory::PlayerSpec::Checkpoint(Arc::new(c)))
     };
     // The rally-trained agent if it is committed, against the single-serve one.
     let a = load("kmac-rally")

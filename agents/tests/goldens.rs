@@ -154,7 +154,7 @@ fn an_episode_of_the_scripted_agent_plays_as_its_golden() {
         MYOCHALLENGE,
     )
     .unwrap();
-    let spec = agents::player::PlayerSpec::scripted("scripted").unwrap();
+    let spec = agents::factory::PlayerSpec::scripted("scripted").unwrap();
     let mut player = spec.build(&m, &MYOCHALLENGE, 0).unwrap();
     player.reseed(11);
     env.reset(ServeKind::P2, &mut Rng::seeded(3), None);
@@ -201,8 +201,8 @@ fn a_ten_rally_match_plays_as_its_golden() {
         seed: 1,
         replay: true,
     };
-    let a = agents::player::PlayerSpec::scripted("scripted").unwrap();
-    let b = agents::player::PlayerSpec::scripted("scripted-drive").unwrap();
+    let a = agents::factory::PlayerSpec::scripted("scripted").unwrap();
+    let b = agents::factory::PlayerSpec::scripted("scripted-drive").unwrap();
     let (record, replay) = agents::matchrun::play_match(&spec, &a, &b, &mut |_| {}).unwrap();
     let mut record = serde_json::to_value(&record).unwrap();
     // The golden's own header says the version; the record's is the same by construction.

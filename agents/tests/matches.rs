@@ -3,8 +3,9 @@
 
 use std::sync::Arc;
 
+use agents::factory::PlayerSpec;
 use agents::matchrun::{play_match, play_match_with, MatchSpec, REPLAY_HZ};
-use agents::player::{InvalidAction, Player, PlayerSpec};
+use agents::player::{InvalidAction, Player};
 use sim::ball::BallState;
 use sim::robot::Robot;
 

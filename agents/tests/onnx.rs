@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use agents::checkpoint::{Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
 use agents::controller::{ControllerSpec, PdGains};
-use agents::env::ObsBlock;
+use agents::observation::ObsBlock;
 use base64::Engine;
 
 fn model() -> Arc<sim::model::Model> {
@@ -80,7 +80,7 @@ fn an_onnx_policy_matches_numpy_and_plays() {
     };
     let r = agents::eval::evaluate(
         &e,
-        &agents::player::PlayerSpec::Checkpoint(Arc::new(ck)),
+        &agents::factory::PlayerSpec::Checkpoint(Arc::new(ck)),
         &|| {},
     )
     .unwrap();

@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use agents::eval::{evaluate, play_episode, Evaluation};
-use agents::player::{players_built, PlayerSpec};
+use agents::factory::{players_built, PlayerSpec};
 use sim::serve::ServeKind;
 
 fn model() -> Arc<sim::model::Model> {
@@ -37,7 +37,7 @@ fn evaluation_builds_one_player_per_worker_and_gives_the_per_episode_numbers() {
     let mut env = sim::episode::SingleServe::new(m.clone(), &e.config, e.preset).unwrap();
     let (mut hits, mut wins) = (0, 0);
     for i in 0..episodes {
-        let (serve_seed, agent_seed) = agents::eval::episode_seeds(e.seed, i);
+        let (serve_seed, agent_seed) = agents::seeds::episode_seeds(e.seed, i);
         let mut p = spec.build(&m, &e.preset, agent_seed).unwrap();
         p.reseed(agent_seed);
         let r = play_episode(&mut env, p.as_mut(), e.kind, serve_seed);

@@ -147,7 +147,7 @@ fn every_method_trains_and_exports_a_checkpoint_that_plays() {
         let text = serde_json::to_string(&ck).unwrap();
         let back = agents::checkpoint::Checkpoint::from_json(&text, &m).unwrap();
         assert_eq!(back.training.as_ref().unwrap().method, method.name());
-        let spec = agents::player::PlayerSpec::Checkpoint(Arc::new(back));
+        let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(back));
         let e = agents::eval::Evaluation {
             model: m.clone(),
             config: sim::config::ArenaConfig::default(),

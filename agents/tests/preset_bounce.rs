@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use agents::checkpoint::{Activation, Checkpoint};
 use agents::controller::{ControllerSpec, PdGains};
-use agents::player::PlayerSpec;
+use agents::factory::PlayerSpec;
 use sim::serve::ServeKind;
 
 fn model() -> Arc<sim::model::Model> {

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use agents::eval::{evaluate, Evaluation};
-use agents::player::PlayerSpec;
+use agents::factory::PlayerSpec;
 use sim::serve::ServeKind;
 
 fn evaluation(seed: u64, episodes: usize) -> Evaluation {

@@ -437,7 +437,7 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
             )
         })?;
     charge(&s, caller, Budget::Agents, 1)?;
-    let spec = agents::player::PlayerSpec::Checkpoint(Arc::new(checkpoint));
+    let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
     let report = crate::qualify(&s, spec).await?.map_err(|e| ApiError {
         field: Some("checkpoint"),
         ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)

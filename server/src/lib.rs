@@ -241,7 +241,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
 /// (each one already uses every core). The outer error is the server's, the inner one the agent's.
 pub async fn qualify(
     state: &AppState,
-    spec: agents::player::PlayerSpec,
+    spec: agents::factory::PlayerSpec,
 ) -> anyhow::Result<Result<agents::eval::EvalReport, String>> {
     let eval = agents::eval::Evaluation {
         model: state.model.clone(),
@@ -309,7 +309,7 @@ async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
                 continue;
             }
         };
-        let spec = agents::player::PlayerSpec::Checkpoint(Arc::new(checkpoint));
+        let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
         let report = match qualify(state, spec).await? {
             Ok(r) => r,
             Err(e) => {

@@ -14,8 +14,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use agents::factory::PlayerSpec;
 use agents::matchrun::{play_match, MatchSpec};
-use agents::player::PlayerSpec;
 use tokio::sync::{Mutex, Notify};
 use tokio::task::JoinHandle;
 

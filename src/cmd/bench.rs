@@ -196,8 +196,8 @@ fn mujoco_steps_per_second(python: &PathBuf, seconds: f64) -> anyhow::Result<(f6
 /// (evaluation episodes/s, match rallies/s, simulated seconds per rally), on one thread.
 fn agent_rates(seconds: f64) -> anyhow::Result<(f64, f64, f64)> {
     use agents::eval::{evaluate, Evaluation};
+    use agents::factory::PlayerSpec;
     use agents::matchrun::{play_match, MatchSpec};
-    use agents::player::PlayerSpec;
     let model = robot_model()?;
     let config = sim::config::ArenaConfig::default();
     let spec = PlayerSpec::scripted("scripted").expect("built-in agent");

@@ -67,13 +67,13 @@ fn print_table(r: &EvalReport) {
 }
 
 /// The same player acting with its mean action (a checkpoint without its `policy_std`).
-pub fn mean_action(spec: agents::player::PlayerSpec) -> agents::player::PlayerSpec {
+pub fn mean_action(spec: agents::factory::PlayerSpec) -> agents::factory::PlayerSpec {
     match spec {
-        agents::player::PlayerSpec::Checkpoint(c) => {
+        agents::factory::PlayerSpec::Checkpoint(c) => {
             let mut c = (*c).clone();
             c.policy_std = None;
             c.name = format!("{} (mean action)", c.name);
-            agents::player::PlayerSpec::Checkpoint(std::sync::Arc::new(c))
+            agents::factory::PlayerSpec::Checkpoint(std::sync::Arc::new(c))
         }
         other => other,
     }

@@ -97,7 +97,7 @@ pub fn player(
     name: &str,
     model: &sim::model::Model,
     which: &str,
-) -> Result<agents::player::PlayerSpec, CliError> {
-    agents::player::PlayerSpec::resolve(name, model, &|p| std::fs::read_to_string(p))
+) -> Result<agents::factory::PlayerSpec, CliError> {
+    agents::factory::PlayerSpec::resolve(name, model, &|p| std::fs::read_to_string(p))
         .map_err(|e| CliError::Usage(format!("{which}: {e}")))
 }

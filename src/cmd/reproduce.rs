@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use agents::checkpoint::Checkpoint;
 use agents::eval::{evaluate, EvalReport, Evaluation};
-use agents::player::PlayerSpec;
+use agents::factory::PlayerSpec;
 use agents::ppo::trainer::CurveRow;
 use agents::ppo::Method;
 use anyhow::anyhow;

@@ -219,7 +219,7 @@ pub struct ControllerConfig {
     pub dynsyn_groups: usize,
     /// Seed of DynSyn's grouping.
     pub dynsyn_seed: u64,
-    /// Least control of the grip muscles, for every method (ours; see `env::apply_grip_floor`).
+    /// Least control of the grip muscles, for every method (ours; see `controller::apply_grip_floor`).
     pub grip_floor: f64,
 }
 

@@ -28,7 +28,8 @@ use super::policy::ActorCritic;
 use super::{stream_seed, Method, Schedule, TrainConfig, TrainEnv, TrainServe};
 use crate::checkpoint::{Checkpoint, ObservationSpec, Training, TrainingPoint, FORMAT, VERSION};
 use crate::controller::ControllerSpec;
-use crate::env::{Env, EpisodeEnd, ObsBlock, RallyEnv};
+use crate::env::{Env, EpisodeEnd, RallyEnv};
+use crate::observation::ObsBlock;
 
 /// Episodes the rolling training statistics are taken over.
 pub const RECENT_EPISODES: usize = 200;

@@ -1,0 +1,118 @@
+//! The player factory: `PlayerSpec`, a recipe for a player that can be sent to worker threads — a
+//! scripted variant by name, a committed checkpoint by name (`config/checkpoints/NAME.json`) or a
+//! checkpoint file — and the count of players built.
+
+use sim::arena::Preset;
+use sim::model::Model;
+use sim::predict::BounceModel;
+
+use crate::player::Player;
+use crate::scripted::{Scripted, ScriptedParams};
+
+/// Where the committed checkpoints live, relative to the repository root (`rally match kmac
+/// kmac-rally` finds `config/checkpoints/kmac.json` and `config/checkpoints/kmac-rally.json`).
+pub const COMMITTED_CHECKPOINTS: &str = "config/checkpoints";
+
+static PLAYERS_BUILT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Players built by [`PlayerSpec::build`] in this process so far (evaluations and matches build one
+/// per worker or side, never one per episode: a test holds them to it).
+pub fn players_built() -> usize {
+    PLAYERS_BUILT.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// How to build a player: a recipe that can be sent to worker threads.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlayerSpec {
+    /// A scripted agent with a name and its parameters.
+    Scripted {
+        /// e.g. "scripted", "scripted-drive".
+        name: String,
+        /// How it plays.
+        params: ScriptedParams,
+    },
+    /// A validated policy checkpoint.
+    Checkpoint(std::sync::Arc<crate::checkpoint::Checkpoint>),
+}
+
+impl PlayerSpec {
+    /// A scripted variant's name, or else a checkpoint file to read (through `read`) and validate.
+    pub fn resolve(
+        name: &str,
+        model: &Model,
+        read: &dyn Fn(&str) -> std::io::Result<String>,
+    ) -> Result<PlayerSpec, String> {
+        if let Some(s) = PlayerSpec::scripted(name) {
+            return Ok(s);
+        }
+        // A bare name is also a committed checkpoint's: config/checkpoints/NAME.json.
+        let committed = format!("{COMMITTED_CHECKPOINTS}/{name}.json");
+        let bare = !name.contains(['/', '\\']) && !name.ends_with(".json");
+        let text = read(name)
+            .or_else(|e| if bare { read(&committed).map_err(|_| e) } else { Err(e) })
+            .map_err(|e| {
+            let names: Vec<&str> = crate::scripted::variants()
+                .iter()
+                .map(|(n, _)| *n)
+                .collect();
+            format!(
+                "'{name}' is neither a scripted agent ({}), a committed checkpoint ({COMMITTED_CHECKPOINTS}/{name}.json) nor a readable checkpoint file: {e}",
+                names.join(", ")
+            )
+        })?;
+        let c = crate::checkpoint::Checkpoint::from_json(&text, model)
+            .map_err(|e| format!("checkpoint {name}: {e}"))?;
+        Ok(PlayerSpec::Checkpoint(std::sync::Arc::new(c)))
+    }
+
+    /// The scripted variant called `name`, if there is one (see [`crate::scripted::variants`]).
+    pub fn scripted(name: &str) -> Option<PlayerSpec> {
+        crate::scripted::variants()
+            .into_iter()
+            .find(|(n, _)| *n == name)
+            .map(|(n, params)| PlayerSpec::Scripted {
+                name: n.to_string(),
+                params,
+            })
+    }
+
+    /// Display name.
+    pub fn name(&self) -> String {
+        match self {
+            PlayerSpec::Scripted { name, .. } => name.clone(),
+            PlayerSpec::Checkpoint(c) => c.name.clone(),
+        }
+    }
+
+    /// A player for `model` in an arena of `preset` (its planner predicts with that preset's table
+    /// bounce).
+    pub fn build(
+        &self,
+        model: &Model,
+        preset: &Preset,
+        seed: u64,
+    ) -> Result<Box<dyn Player>, String> {
+        PLAYERS_BUILT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let bounce = BounceModel::for_table(&preset.table);
+        match self {
+            PlayerSpec::Scripted { params, .. } => {
+                let paddle = model
+                    .body("paddle")
+                    .ok_or("the model has no body named 'paddle'")?;
+                Ok(Box::new(Scripted::new(
+                    model,
+                    paddle,
+                    params.clone(),
+                    bounce,
+                    seed,
+                )))
+            }
+            PlayerSpec::Checkpoint(c) => {
+                c.validate(model).map_err(|e| e.to_string())?;
+                let p = crate::checkpoint::CheckpointPlayer::new(c.clone(), model, bounce, seed)
+                    .map_err(|e| e.to_string())?;
+                Ok(Box::new(p))
+            }
+        }
+    }
+}

@@ -1,0 +1,177 @@
+//! What a policy sees (DESIGN §6): the observation blocks a checkpoint lists and the `Observer` that
+//! builds them for one robot from the raw state `sim` exposes, keeping the planner's command (strike
+//! point, racket velocity and orientation, time to the strike). Training and playing read the same
+//! observation through this module.
+
+use serde::{Deserialize, Serialize};
+use sim::arena::{self, Side};
+use sim::ball::BallState;
+use sim::model::Model;
+use sim::predict::BounceModel;
+use sim::rng::Rng;
+use sim::robot::Robot;
+
+use crate::controller::ActionSpace;
+use crate::planner::{self, Plan};
+
+/// The blocks an observation can hold, in the order a checkpoint lists them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObsBlock {
+    /// Positions of the independent joints.
+    Qpos,
+    /// Velocities of the independent joints.
+    Qvel,
+    /// Muscle activations.
+    Act,
+    /// Muscle lengths, normalised to their length range (0 at the shortest, 1 at the longest).
+    MuscleLength,
+    /// Ball centre (robot frame).
+    BallPos,
+    /// Ball velocity (robot frame).
+    BallVel,
+    /// Paddle position (3), orientation (w, x, y, z), velocity (3), angular velocity (3).
+    Paddle,
+    /// The planner's command: strike position (3), racket velocity (3), racket orientation (4),
+    /// time to the strike (1); zeros while no ball is coming.
+    Command,
+}
+
+impl ObsBlock {
+    /// Every block, in the default order.
+    pub const ALL: [ObsBlock; 8] = [
+        ObsBlock::Qpos,
+        ObsBlock::Qvel,
+        ObsBlock::Act,
+        ObsBlock::MuscleLength,
+        ObsBlock::BallPos,
+        ObsBlock::BallVel,
+        ObsBlock::Paddle,
+        ObsBlock::Command,
+    ];
+
+    /// Entries of this block for `space`.
+    pub fn size(self, space: &ActionSpace) -> usize {
+        match self {
+            ObsBlock::Qpos | ObsBlock::Qvel => space.joints.len(),
+            ObsBlock::Act | ObsBlock::MuscleLength => space.muscles.len(),
+            ObsBlock::BallPos | ObsBlock::BallVel => 3,
+            ObsBlock::Paddle => 13,
+            ObsBlock::Command => 11,
+        }
+    }
+}
+
+/// Builds observations for one robot, keeping the planner's current command.
+#[derive(Debug, Clone)]
+pub struct Observer {
+    /// Which blocks, in order.
+    pub blocks: Vec<ObsBlock>,
+    space: ActionSpace,
+    plan: Option<(Plan, f64)>,
+    rng: Rng,
+    bounce: BounceModel,
+}
+
+impl Observer {
+    /// An observer of `blocks` for `model`.
+    pub fn new(model: &Model, blocks: Vec<ObsBlock>, seed: u64) -> Observer {
+        Observer {
+            blocks,
+            space: ActionSpace::new(model),
+            plan: None,
+            rng: Rng::seeded(seed),
+            bounce: BounceModel::for_table(&arena::MYOCHALLENGE.table),
+        }
+    }
+
+    /// The same observer planning with `bounce` (the arena preset's table bounce; the default is
+    /// the MyoChallenge table's).
+    pub fn with_bounce(mut self, bounce: BounceModel) -> Observer {
+        self.bounce = bounce;
+        self
+    }
+
+    /// Observation length.
+    pub fn size(&self) -> usize {
+        self.blocks.iter().map(|b| b.size(&self.space)).sum()
+    }
+
+    /// Forgets the command (new episode) and reseeds the planner's sampler.
+    pub fn reset(&mut self, seed: u64) {
+        self.plan = None;
+        self.rng = Rng::seeded(seed);
+    }
+
+    /// The current command, if a ball is coming: the plan and the absolute strike time.
+    pub fn command(&self) -> Option<&(Plan, f64)> {
+        self.plan.as_ref()
+    }
+
+    /// Updates the command from the ball (world frame) at time `t`: plans once the ball flies towards
+    /// this robot, drops the plan once it flies away.
+    pub fn update_command(&mut self, robot: &Robot, ball: &BallState, t: f64) {
+        let f = robot.frame;
+        let pos = f.point_from_world(&ball.pos);
+        let vel = f.vector_from_world(&ball.vel);
+        if vel.x > 0.0 && pos.x < arena::STRIKE_PLANE_X {
+            if self.plan.is_none() {
+                if let Ok(p) =
+                    planner::plan(&pos, &vel, Some(Side::A), None, &mut self.rng, &self.bounce)
+                {
+                    self.plan = Some((p, t + p.t_strike));
+                }
+            }
+        } else if vel.x < 0.0 {
+            self.plan = None;
+        }
+    }
+
+    /// Writes the observation of `robot` and `ball` (world frame) at time `t` into `out`.
+    pub fn observe(&self, robot: &Robot, ball: &BallState, t: f64, out: &mut Vec<f64>) {
+        out.clear();
+        let model = robot.held_model();
+        let f = robot.frame;
+        for block in &self.blocks {
+            match block {
+                ObsBlock::Qpos => out.extend(
+                    self.space
+                        .joints
+                        .iter()
+                        .map(|&j| robot.state.qpos[model.joints[j].qpos_adr]),
+                ),
+                ObsBlock::Qvel => out.extend(
+                    self.space
+                        .joints
+                        .iter()
+                        .map(|&j| robot.state.qvel[model.joints[j].dof_adr]),
+                ),
+                ObsBlock::Act => out.extend(self.space.muscles.iter().map(|&a| robot.state.act[a])),
+                ObsBlock::MuscleLength => out.extend(self.space.muscles.iter().map(|&a| {
+                    let lr = model.actuators[a].lengthrange;
+                    (robot.data.actuator_length[a] - lr[0]) / (lr[1] - lr[0]).max(1e-9)
+                })),
+                ObsBlock::BallPos => out.extend(f.point_from_world(&ball.pos).iter()),
+                ObsBlock::BallVel => out.extend(f.vector_from_world(&ball.vel).iter()),
+                ObsBlock::Paddle => {
+                    let p = &robot.paddle;
+                    let q = p.pose.rot.quaternion();
+                    out.extend(p.pose.pos.iter());
+                    out.extend([q.w, q.i, q.j, q.k]);
+                    out.extend(p.lin_vel.iter());
+                    out.extend(p.ang_vel.iter());
+                }
+                ObsBlock::Command => match &self.plan {
+                    Some((p, t_hit)) => {
+                        let q = p.racket_quat.quaternion();
+                        out.extend(p.strike_pos.iter());
+                        out.extend(p.racket_vel.iter());
+                        out.extend([q.w, q.i, q.j, q.k]);
+                        out.push((t_hit - t).max(0.0));
+                    }
+                    None => out.extend([0.0; 11]),
+                },
+            }
+        }
+    }
+}
