@@ -1,0 +1,181 @@
+//! K-MAC, the paper's Kinematics-based Muscle Actuation Controller (DESIGN §6): target joint
+//! positions → muscle lengths by forward kinematics → length PD → activation → control; and the
+//! gravity feed-forward for callers that hold postures.
+
+use nalgebra::DVector;
+use sim::dynamics::State;
+use sim::model::{Dynamics, JointKind, Model, Transmission};
+use sim::muscle;
+
+use super::*;
+
+/// Steps 2–5 of K-MAC for one muscle (DESIGN §6): PD force on length, clipped to pulling, the
+/// activation that produces it with the simulator's own gain and bias (gain limited to ≤ −1 N), and
+/// the control that reaches that activation in one control step `dt` by inverting the activation
+/// dynamics.
+pub fn muscle_pd_control(
+    model: &Model,
+    a: usize,
+    l_target: f64,
+    now: &MuscleNow,
+    gains: &PdGains,
+    dt: f64,
+) -> f64 {
+    let (l, l_dot, act) = (now.length, now.velocity, now.act);
+    let actuator = &model.actuators[a];
+    let Some(p) = actuator.muscle() else {
+        return 0.0;
+    };
+    let lr = actuator.lengthrange;
+    let f_max = p.peak_force(0.0);
+    let dl = (lr[1] - lr[0]).max(1e-9);
+    let f = f_max * (gains.kp * (l_target - l) - gains.kd * l_dot) / dl;
+    let f_star = f.clamp(-f_max, 0.0);
+    let gain = muscle::gain(p, l, l_dot, lr, 0.0).min(-1.0);
+    let bias = muscle::bias(p, l, lr, 0.0);
+    let act_star = ((f_star - bias) / gain).clamp(0.0, 1.0);
+    let tau = match actuator.dynamics {
+        Dynamics::Muscle(d) => muscle::time_constant(act_star, act, &d),
+        Dynamics::None => return act_star,
+    };
+    (act + (act_star - act) * tau / dt).clamp(0.0, 1.0)
+}
+
+/// K-MAC: target joint positions → muscle controls.
+#[derive(Debug, Clone)]
+pub struct Kmac {
+    /// Action layout.
+    pub space: ActionSpace,
+    /// Length PD gains.
+    pub gains: PdGains,
+    target: MuscleGeometry,
+    current: MuscleGeometry,
+    qpos_target: Vec<f64>,
+}
+
+impl Kmac {
+    /// K-MAC for `model`.
+    pub fn new(model: &Model, gains: PdGains) -> Kmac {
+        Kmac {
+            space: ActionSpace::new(model),
+            gains,
+            target: MuscleGeometry::new(model),
+            current: MuscleGeometry::new(model),
+            qpos_target: model.qpos0.clone(),
+        }
+    }
+
+    /// Writes controls for every actuator into `ctrl`, given target positions of `space.joints`.
+    pub fn controls(
+        &mut self,
+        model: &Model,
+        state: &State,
+        targets: &[f64],
+        dt: f64,
+        ctrl: &mut [f64],
+    ) {
+        // 1. The full target configuration (couplings applied) and its muscle lengths.
+        self.qpos_target.copy_from_slice(&state.qpos);
+        for (&j, &z) in self.space.joints.iter().zip(targets) {
+            self.qpos_target[model.joints[j].qpos_adr] = z;
+        }
+        model.apply_couplings(&mut self.qpos_target);
+        self.target.update(model, &self.qpos_target);
+        self.current.update(model, &state.qpos);
+        // 2–5 per muscle.
+        for &a in &self.space.muscles {
+            let l_star = self.target.length(model, a, &self.qpos_target);
+            let now = self.current.now(model, a, state);
+            ctrl[a] = muscle_pd_control(model, a, l_star, &now, &self.gains, dt);
+        }
+        // The pelvis follows its servos.
+        for (servo, &z) in self.space.servos.iter().zip(targets) {
+            if let Some(s) = servo {
+                ctrl[*s] = z;
+            }
+        }
+    }
+}
+
+/// The joint-target offset that lets K-MAC hold `qpos` still against gravity and the joints' passive
+/// springs (a static feed-forward for callers that track postures, e.g. the scripted agent).
+///
+/// Near a target, K-MAC's muscle forces are `f_i = F_i·k_p·r_iᵀ(z* − z)/Δl_i` (moment arms `r_i`), a
+/// joint stiffness `K = Σ F_i·k_p/Δl_i · r_i r_iᵀ`, of which about half acts (muscles only pull: one of
+/// each antagonist pair). Holding `z` needs the muscle torque `τ = G(z) − τ_passive(z)`, so the target
+/// must lead by `Δz = (K/2)⁻¹ τ`. Returned per `space.joints` entry (zero for servo joints and `skip`).
+pub fn gravity_offset(
+    model: &Model,
+    data: &mut sim::dynamics::Data,
+    space: &ActionSpace,
+    gains: &PdGains,
+    qpos: &[f64],
+    skip: &[usize],
+) -> Vec<f64> {
+    let nv = model.nv;
+    data.positions(model, qpos);
+    data.velocities(model, &vec![0.0; nv]);
+    data.update_couplings(model, qpos, &vec![0.0; nv]);
+    // Torque the muscles must supply, in all dofs: gravity minus the passive springs' help.
+    let mut tau = data.bias.clone();
+    for j in &model.joints {
+        if j.kind != JointKind::Free {
+            tau[j.dof_adr] -= -j.stiffness * (qpos[j.qpos_adr] - j.springref);
+        }
+    }
+    // Joint stiffness of the muscles under K-MAC, in all dofs.
+    let mut k: nalgebra::DMatrix<f64> = nalgebra::DMatrix::zeros(nv, nv);
+    for &a in &space.muscles {
+        let act = &model.actuators[a];
+        let (Some(p), Transmission::Tendon(t)) = (act.muscle(), act.transmission) else {
+            continue;
+        };
+        let c = 0.5 * p.peak_force(0.0) * gains.kp
+            / (act.lengthrange[1] - act.lengthrange[0]).max(1e-9);
+        let dofs = &data.ten.dofs[t];
+        for &i in dofs {
+            for &j in dofs {
+                k[(i, j)] += c * data.ten.moment[(t, i)] * data.ten.moment[(t, j)];
+            }
+        }
+    }
+    // Reduce to the action joints that muscles drive.
+    let chosen: Vec<usize> = (0..space.joints.len())
+        .filter(|&i| space.servos[i].is_none() && !skip.contains(&space.joints[i]))
+        .collect();
+    let column = |i: usize| -> Vec<(usize, f64)> {
+        let dof = model.joints[space.joints[i]].dof_adr;
+        let r = data
+            .independent_dofs
+            .iter()
+            .position(|&d| d == dof)
+            .expect("independent joint");
+        data.coupling_columns[r].clone()
+    };
+    let cols: Vec<Vec<(usize, f64)>> = chosen.iter().map(|&i| column(i)).collect();
+    let n = chosen.len();
+    let mut kr: nalgebra::DMatrix<f64> = nalgebra::DMatrix::zeros(n, n);
+    let mut tr: DVector<f64> = DVector::zeros(n);
+    for a in 0..n {
+        tr[a] = cols[a].iter().map(|&(i, w)| w * tau[i]).sum::<f64>();
+        for b in 0..n {
+            let mut v = 0.0;
+            for &(i, wa) in &cols[a] {
+                for &(j, wb) in &cols[b] {
+                    v += wa * wb * k[(i, j)];
+                }
+            }
+            kr[(a, b)] = v;
+        }
+        kr[(a, a)] += 1e-3;
+    }
+    let dz = kr
+        .cholesky()
+        .map(|ch| ch.solve(&tr))
+        .unwrap_or_else(|| DVector::zeros(n));
+    let mut out = vec![0.0; space.joints.len()];
+    for (a, &i) in chosen.iter().enumerate() {
+        out[i] = dz[a].clamp(-0.5, 0.5);
+    }
+    out
+}
