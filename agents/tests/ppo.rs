@@ -49,6 +49,21 @@ fn the_shipped_train_toml_is_the_default_configuration() {
 }
 
 #[test]
+fn the_rally_configuration_is_the_default_but_for_its_environment_and_entropy() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/train-rally.toml"
+    ))
+    .expect("config/train-rally.toml");
+    let mut c: TrainConfig = toml::from_str(&text).expect("parses");
+    assert_eq!(c.env, agents::ppo::TrainEnv::Rally);
+    assert_eq!(c.ppo.entropy_coef, 0.0);
+    c.env = agents::ppo::TrainEnv::Single;
+    c.ppo.entropy_coef = TrainConfig::default().ppo.entropy_coef;
+    assert_eq!(c, TrainConfig::default());
+}
+
+#[test]
 fn a_short_kmac_run_learns_a_signal() {
     // 20 iterations of 64 envs × 16 steps (20 480 control steps), against the untrained policy: the
     // critic's loss falls and the episodes' reward (command tracking and grasp, mostly) rises.
