@@ -13,7 +13,10 @@ fn main() {
     let mut ik = PaddleIk::new(
         &model,
         paddle,
-        Vector3::from(sim::arena::BLADE_OFFSET),
+        sim::geometry::PaddleShape::from_model(&model, paddle)
+            .unwrap()
+            .blade
+            .center,
         &[grip],
     );
     let mut ready = sim::episode::ready_pose(&model).unwrap();

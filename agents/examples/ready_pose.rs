@@ -8,7 +8,10 @@ fn main() {
     let mut ik = PaddleIk::new(
         &model,
         model.body("paddle").unwrap(),
-        Vector3::from(sim::arena::BLADE_OFFSET),
+        sim::geometry::PaddleShape::from_model(&model, model.body("paddle").unwrap())
+            .unwrap()
+            .blade
+            .center,
         &[grip],
     );
     let mut q = sim::episode::ready_pose(&model).unwrap();

@@ -164,7 +164,7 @@ pub fn predicted_legal(ball: &BallState, bounce: &BounceModel) -> bool {
 pub fn blade(robot: &Robot) -> (V3, V3) {
     let p = &robot.paddle.pose;
     let rot: UnitQuaternion<f64> = p.rot;
-    (p.to_world(&V3::from(arena::BLADE_OFFSET)), rot * V3::z())
+    (p.to_world(&robot.shape.blade.center), rot * V3::z())
 }
 
 /// The reward of one incoming ball, step by step: dense pose terms against the plan (in full once

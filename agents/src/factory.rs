@@ -105,7 +105,7 @@ impl PlayerSpec {
                     params.clone(),
                     bounce,
                     seed,
-                )))
+                )?))
             }
             PlayerSpec::Checkpoint(c) => {
                 c.validate(model).map_err(|e| e.to_string())?;

@@ -103,18 +103,22 @@ pub struct Scripted {
 }
 
 impl Scripted {
-    /// An agent for `robot`'s model; `seed` drives its return-sampler draws.
+    /// An agent for `robot`'s model; `seed` drives its return-sampler draws. Fails if the model's
+    /// paddle body has no blade.
     pub fn new(
         model: &Model,
         paddle_body: usize,
         params: ScriptedParams,
         bounce: BounceModel,
         seed: u64,
-    ) -> Scripted {
+    ) -> Result<Scripted, String> {
         let kmac = Kmac::new(model, params.gains);
         let grip_joint = model.joint("grip");
         let exclude: Vec<usize> = grip_joint.into_iter().collect();
-        let ik = PaddleIk::new(model, paddle_body, V3::from(arena::BLADE_OFFSET), &exclude);
+        let blade = sim::geometry::PaddleShape::from_model(model, paddle_body)?
+            .blade
+            .center;
+        let ik = PaddleIk::new(model, paddle_body, blade, &exclude);
         let mut ready = sim::episode::ready_pose(model).unwrap_or_else(|| model.qpos0.clone());
         model.apply_couplings(&mut ready);
         let targets: Vec<f64> = kmac
@@ -137,7 +141,7 @@ impl Scripted {
         } else {
             vec![0.0; targets.len()]
         };
-        Scripted {
+        Ok(Scripted {
             params,
             kmac,
             ik,
@@ -151,7 +155,7 @@ impl Scripted {
             follow_until: f64::NEG_INFINITY,
             data,
             ready_offset,
-        }
+        })
     }
 
     /// Reseeds the return-sampler draws.

@@ -182,7 +182,10 @@ fn ik_reaches_the_hitting_plane_with_the_blade_facing_the_net() {
     let mut ik = PaddleIk::new(
         &m,
         m.body("paddle").unwrap(),
-        Vector3::from(sim::arena::BLADE_OFFSET),
+        sim::geometry::PaddleShape::from_model(&m, m.body("paddle").unwrap())
+            .unwrap()
+            .blade
+            .center,
         &[m.joint("grip").unwrap()],
     );
     let q0 = ready(&m);

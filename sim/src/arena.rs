@@ -33,15 +33,17 @@ pub const BALL_INERTIA: f64 = 2.0 / 3.0 * BALL_MASS * BALL_RADIUS * BALL_RADIUS;
 pub const TABLE_TOP_Z: f64 = 0.795;
 /// Table half-length along x, m (two 0.685-long halves: x ∈ [−1.37, 1.37]).
 pub const TABLE_HALF_LENGTH: f64 = 1.37;
-/// Table extent across, m (MyoSuite box half-width 0.76 centred at y = 0.04).
-pub const TABLE_Y_MIN: f64 = -0.72;
-/// Table extent across, m.
-pub const TABLE_Y_MAX: f64 = 0.80;
 /// The table's centre line, m: MyoSuite's table is offset from y = 0 (DESIGN §3).
 pub const TABLE_CENTER_Y: f64 = 0.04;
+/// Table half-width across, m (MyoSuite box half-width 0.76, centred at `TABLE_CENTER_Y`).
+pub const TABLE_HALF_WIDTH: f64 = 0.76;
+/// Table extent across, m.
+pub const TABLE_Y_MIN: f64 = TABLE_CENTER_Y - TABLE_HALF_WIDTH;
+/// Table extent across, m.
+pub const TABLE_Y_MAX: f64 = TABLE_CENTER_Y + TABLE_HALF_WIDTH;
 
-/// Net box centre, m (MyoSuite `coll_net` pos).
-pub const NET_CENTER: [f64; 3] = [0.0, 0.04, 0.795];
+/// Net box centre, m (MyoSuite `coll_net` pos: over the table's centre line, at its top).
+pub const NET_CENTER: [f64; 3] = [0.0, TABLE_CENTER_Y, TABLE_TOP_Z];
 /// Net box half-sizes, m (MyoSuite `coll_net` size): top at z = 0.9475.
 pub const NET_HALF_SIZE: [f64; 3] = [0.005, 0.9125, 0.1525];
 /// Height of the net's top, m.
@@ -50,26 +52,8 @@ pub const NET_TOP_Z: f64 = NET_CENTER[2] + NET_HALF_SIZE[2];
 /// Floor height, m.
 pub const FLOOR_Z: f64 = 0.0;
 
-/// Paddle mass, kg (MyoSuite paddle body).
-pub const PADDLE_MASS: f64 = 0.15;
-/// Blade radius, m (MyoSuite paddle `pad` cylinder).
-pub const BLADE_RADIUS: f64 = 0.093;
-/// Blade half-thickness, m (MyoSuite paddle `pad` cylinder half-height). The blade's axis, its
-/// normal, is the paddle frame's +z.
-pub const BLADE_HALF_THICKNESS: f64 = 0.02;
-/// Blade centre in the paddle frame, m: 0.07 m along the paddle frame's −x (official planner
-/// `compute_paddle_pos`, `pad_local = (−0.07, 0, 0)`).
-pub const BLADE_OFFSET: [f64; 3] = [-0.07, 0.0, 0.0];
-/// Handle radius, m (MyoSuite paddle `handle` cylinder).
-pub const HANDLE_RADIUS: f64 = 0.016;
-/// Handle half-length, m. The handle's axis is the paddle frame's x; it ends where the blade begins.
-pub const HANDLE_HALF_LENGTH: f64 = 0.051;
-/// Handle centre in the paddle frame, m: just beyond the blade's rim on +x.
-pub const HANDLE_OFFSET: [f64; 3] = [
-    BLADE_OFFSET[0] + BLADE_RADIUS + HANDLE_HALF_LENGTH,
-    0.0,
-    0.0,
-];
+// The paddle (blade, handle, mass) is the robot model's: its `paddle` body's `blade` and `handle`
+// geoms (`geometry::PaddleShape::from_model`). The MJCF is its one source.
 
 /// Virtual hitting plane of side A (it receives there), m (paper §IV-B, official `hit_plane_x`).
 pub const STRIKE_PLANE_X: f64 = 1.8;

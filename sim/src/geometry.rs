@@ -7,6 +7,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::arena;
+use crate::model::{GeomKind, Model};
 
 type V3 = Vector3<f64>;
 
@@ -48,10 +49,10 @@ impl Aabb {
     /// The table as one solid box from below the floor to the playing surface (DESIGN §4).
     pub fn table() -> Aabb {
         Aabb {
-            center: V3::new(0.0, 0.5 * (arena::TABLE_Y_MIN + arena::TABLE_Y_MAX), 0.0),
+            center: V3::new(0.0, arena::TABLE_CENTER_Y, 0.0),
             half: V3::new(
                 arena::TABLE_HALF_LENGTH,
-                0.5 * (arena::TABLE_Y_MAX - arena::TABLE_Y_MIN),
+                arena::TABLE_HALF_WIDTH,
                 arena::TABLE_TOP_Z,
             ),
         }
@@ -222,27 +223,58 @@ pub struct PaddleShape {
 }
 
 impl PaddleShape {
-    /// MyoSuite's paddle: a 0.093 m blade 4 cm thick and a 0.016 m handle.
-    pub fn standard() -> PaddleShape {
-        PaddleShape::with_blade_half_thickness(arena::BLADE_HALF_THICKNESS)
+    /// The paddle of `model`'s body `paddle`: its cylinder geoms named `blade` (axis along the
+    /// paddle frame's z: the blade's normal) and `handle` (along x). Fails, naming what is missing
+    /// or wrong, if the model does not describe such a paddle.
+    pub fn from_model(model: &Model, paddle: usize) -> Result<PaddleShape, String> {
+        let body = &model.bodies[paddle].name;
+        let cylinder = |name: &str, axis: usize| -> Result<Cylinder, String> {
+            let g = model
+                .geoms
+                .iter()
+                .find(|g| g.body == paddle && g.name == name)
+                .ok_or_else(|| format!("body '{body}' has no geom named '{name}'"))?;
+            if g.kind != GeomKind::Cylinder {
+                return Err(format!("geom '{name}' of body '{body}' must be a cylinder"));
+            }
+            let along = g.quat * V3::z();
+            if (along[axis].abs() - 1.0).abs() > 1e-9 {
+                return Err(format!(
+                    "geom '{name}' of body '{body}': its axis must lie along the paddle frame's {}",
+                    ["x", "y", "z"][axis]
+                ));
+            }
+            Ok(Cylinder {
+                center: g.pos,
+                axis,
+                radius: g.size[0],
+                half_length: g.size[1],
+            })
+        };
+        Ok(PaddleShape {
+            blade: cylinder("blade", 2)?,
+            handle: cylinder("handle", 0)?,
+        })
     }
 
-    /// The standard paddle with another blade thickness (e.g. a realistic 5 mm blade: 0.0025).
-    pub fn with_blade_half_thickness(half_thickness: f64) -> PaddleShape {
-        PaddleShape {
-            blade: Cylinder {
-                center: V3::from(arena::BLADE_OFFSET),
-                axis: 2,
-                radius: arena::BLADE_RADIUS,
-                half_length: half_thickness,
-            },
-            handle: Cylinder {
-                center: V3::from(arena::HANDLE_OFFSET),
-                axis: 0,
-                radius: arena::HANDLE_RADIUS,
-                half_length: arena::HANDLE_HALF_LENGTH,
-            },
-        }
+    /// The default robot's paddle (`config/models/upper_body.xml`: MyoSuite's, a 0.093 m blade
+    /// 4 cm thick and a 0.016 m handle), for scenes without a robot.
+    pub fn standard() -> PaddleShape {
+        static SHAPE: std::sync::OnceLock<PaddleShape> = std::sync::OnceLock::new();
+        *SHAPE.get_or_init(|| {
+            let model = crate::mjcf::parse_str(crate::config::DEFAULT_MODEL_XML, "upper_body.xml")
+                .expect("the compiled-in default model loads (tested)");
+            let paddle = model
+                .body("paddle")
+                .expect("the default model has a paddle");
+            PaddleShape::from_model(&model, paddle).expect("the default model's paddle is valid")
+        })
+    }
+
+    /// This paddle with another blade thickness (e.g. a realistic 5 mm blade: 0.0025).
+    pub fn with_blade_half_thickness(mut self, half_thickness: f64) -> PaddleShape {
+        self.blade.half_length = half_thickness;
+        self
     }
 
     /// Nearest surface point of blade or handle to `p`, in the paddle frame.

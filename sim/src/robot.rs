@@ -146,6 +146,8 @@ pub struct Robot {
     pending_impulse: Option<(V3, V3)>,
     /// Grip capacity at the last step, N.
     pub capacity: f64,
+    /// The paddle's blade and handle, from the model's geoms.
+    pub shape: PaddleShape,
 }
 
 impl Robot {
@@ -158,6 +160,8 @@ impl Robot {
         let pb = model
             .body(&params.paddle_body)
             .ok_or_else(|| format!("grip.paddle_body: no body named '{}'", params.paddle_body))?;
+        let shape =
+            PaddleShape::from_model(&model, pb).map_err(|e| format!("grip.paddle_body: {e}"))?;
         let paddle = &model.bodies[pb];
         if paddle.parent != Some(hand) || paddle.joint_count > 0 {
             return Err(format!(
@@ -211,6 +215,7 @@ impl Robot {
             acceleration: (V3::zeros(), V3::zeros()),
             pending_impulse: None,
             capacity: 0.0,
+            shape,
         };
         robot.reset(None);
         Ok(robot)
@@ -428,7 +433,7 @@ impl Robot {
         let f = &self.frame;
         Paddle {
             owner: self.side,
-            shape: PaddleShape::standard(),
+            shape: self.shape,
             pose: Pose {
                 pos: f.point_to_world(&self.paddle.pose.pos),
                 rot: f.rotation_to_world(&self.paddle.pose.rot),

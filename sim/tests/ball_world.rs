@@ -230,7 +230,7 @@ fn no_tunnelling_through_4cm_or_5mm_blade_up_to_40_m_s() {
     let tangent = normal.cross(&V3::x()).normalize();
     for shape in [
         PaddleShape::standard(),
-        PaddleShape::with_blade_half_thickness(0.0025),
+        PaddleShape::standard().with_blade_half_thickness(0.0025),
     ] {
         for &speed in &[2.0, 5.0, 10.0, 20.0, 30.0, 40.0] {
             for &angle_deg in &[0.0, 20.0, 45.0, 70.0, 80.0] {

@@ -179,3 +179,30 @@ fn robot_b_is_robot_a_turned_about_the_table_centre_line() {
             && arena.robots[1].ball_paddle().pose.pos.x < -1.37
     );
 }
+
+#[test]
+fn the_paddle_the_ball_meets_is_the_models() {
+    // The default model's blade and handle, as the ball world sees them.
+    let m = model();
+    let r = Robot::new(m.clone(), &ArenaConfig::default().grip, Side::A).unwrap();
+    let shape = r.ball_paddle().shape;
+    assert_eq!(shape, sim::geometry::PaddleShape::standard());
+    assert_eq!((shape.blade.radius, shape.blade.half_length), (0.093, 0.02));
+    assert_eq!(shape.blade.center, Vector3::new(-0.07, 0.0, 0.0));
+    assert_eq!((shape.handle.radius, shape.handle.axis), (0.016, 0));
+    // Edit the model's blade: the ball world's paddle changes with it.
+    let bigger = DEFAULT_MODEL_XML.replace(
+        r#"<geom name="blade" type="cylinder" size="0.093 0.02""#,
+        r#"<geom name="blade" type="cylinder" size="0.12 0.01""#,
+    );
+    assert_ne!(bigger, DEFAULT_MODEL_XML, "the edit applies");
+    let m2 = Arc::new(sim::mjcf::parse_str(&bigger, "bigger.xml").unwrap());
+    let r2 = Robot::new(m2, &ArenaConfig::default().grip, Side::B).unwrap();
+    let s2 = r2.ball_paddle().shape;
+    assert_eq!((s2.blade.radius, s2.blade.half_length), (0.12, 0.01));
+    // A model whose paddle has no blade is refused, naming the geom.
+    let bladeless = DEFAULT_MODEL_XML.replace(r#"name="blade""#, r#"name="plate""#);
+    let m3 = Arc::new(sim::mjcf::parse_str(&bladeless, "bladeless.xml").unwrap());
+    let e = Robot::new(m3, &ArenaConfig::default().grip, Side::A).unwrap_err();
+    assert!(e.contains("no geom named 'blade'"), "{e}");
+}

@@ -354,7 +354,7 @@ fn a_hit_on_the_blades_rim_is_a_hit() {
     let mut r = Referee::new(Side::B);
     r.on_contact(&table(0.0, 0.8));
     // Aim the ball so its centre passes 1 cm beyond the rim (outside the disc) at the face's plane.
-    let rim_top = blade_centre.z + arena::BLADE_RADIUS + 0.01;
+    let rim_top = blade_centre.z + sim::geometry::PaddleShape::standard().blade.radius + 0.01;
     let start = V3::new(1.2, 0.04, 1.2);
     let vel = aim(
         start,
@@ -368,7 +368,7 @@ fn a_hit_on_the_blades_rim_is_a_hit() {
         .expect("the rim is hit");
     let local = pose.to_local(&hit.pos) - paddle.shape.blade.center;
     assert!(
-        local.xy().norm() > arena::BLADE_RADIUS,
+        local.xy().norm() > sim::geometry::PaddleShape::standard().blade.radius,
         "the centre was beyond the rim: {local:?}"
     );
     assert!(matches!(hit.kind, ContactKind::Paddle { owner: Side::A }));
