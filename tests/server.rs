@@ -193,6 +193,14 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
 
     let (code, h) = call(a, "GET", "/api/v1/healthz", None, None);
     assert_eq!((code, h["status"].as_str()), (200, Some("ok")));
+    // The pages draw the simulator's own arena.
+    let (code, arena) = call(a, "GET", "/api/v1/arena", None, None);
+    assert_eq!(code, 200);
+    assert_eq!(arena["table"]["y"], json!([-0.72, 0.8]), "{arena}");
+    assert_eq!(arena["table"]["top_z"], 0.795);
+    assert_eq!(arena["net"]["top_z"], 0.9475);
+    assert_eq!(arena["paddle"]["blade"]["radius"], 0.093);
+    assert_eq!(arena["sim_version"], h["sim_version"]);
     let (_, agents) = call(a, "GET", "/api/v1/agents", None, None);
     let builtins = agents["agents"].as_array().unwrap().len();
     assert!(builtins >= 3, "{agents}");

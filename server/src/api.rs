@@ -178,6 +178,7 @@ pub fn router(state: AppState) -> Router {
         .route("/sprt/{id}", get(get_sprt).delete(cancel_sprt))
         .route("/leaderboard", get(leaderboard))
         .route("/events", get(events))
+        .route("/arena", get(arena))
         .route("/tokens", axum::routing::post(issue_token))
         .route("/metrics", get(metrics))
         .route("/openapi.json", get(openapi))
@@ -230,6 +231,33 @@ async fn events(
         Some((Ok(event), rx))
     });
     Sse::new(stream).keep_alive(KeepAlive::new().interval(std::time::Duration::from_secs(15)))
+}
+
+/// `GET /arena`: the arena's geometry as the simulator has it (table, net, floor, hitting planes, serve
+/// box, ball, the default robot's paddle), so that pages draw what the simulator simulates.
+async fn arena(State(s): State<AppState>) -> Json<Value> {
+    use sim::arena as a;
+    let paddle = s
+        .model
+        .body("paddle")
+        .and_then(|b| sim::geometry::PaddleShape::from_model(&s.model, b).ok())
+        .unwrap_or_else(sim::geometry::PaddleShape::standard);
+    let cyl = |c: &sim::geometry::Cylinder| {
+        let axis = ["x", "y", "z"][c.axis];
+        json!({"center": [c.center.x, c.center.y, c.center.z], "axis": axis,
+               "radius": c.radius, "half_length": c.half_length})
+    };
+    Json(json!({
+        "sim_version": sim::SIM_VERSION,
+        "table": {"x": [-a::TABLE_HALF_LENGTH, a::TABLE_HALF_LENGTH], "y": [a::TABLE_Y_MIN, a::TABLE_Y_MAX],
+                  "center_y": a::TABLE_CENTER_Y, "top_z": a::TABLE_TOP_Z},
+        "net": {"center": a::NET_CENTER, "half_size": a::NET_HALF_SIZE, "top_z": a::NET_TOP_Z},
+        "floor_z": a::FLOOR_Z,
+        "strike_plane_x": a::STRIKE_PLANE_X,
+        "serve_box": {"z": [a::SERVE_BOX_Z.0, a::SERVE_BOX_Z.1], "half_width": a::SERVE_BOX_HALF_WIDTH},
+        "ball_radius": a::BALL_RADIUS,
+        "paddle": {"blade": cyl(&paddle.blade), "handle": cyl(&paddle.handle)},
+    }))
 }
 
 async fn get_agent(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Json<Value>> {
