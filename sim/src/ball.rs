@@ -60,17 +60,37 @@ pub fn flight_acceleration(air: Option<&AirModel>, vel: &V3, spin: &V3) -> V3 {
     }
 }
 
-/// The discrete closed form of semi-implicit Euler under gravity alone, after `n` steps of `h`:
-/// horizontal motion is exact, and `z_n = z0 + v0·t − ½·g·t·(t + h)` with `t = n·h`.
-/// The velocity is `v0 − g·t`. This is the reference our flight is tested against.
-pub fn vacuum_flight_closed_form(start: &BallState, n: u32, h: f64) -> (V3, V3) {
-    let t = n as f64 * h;
+/// Drag-free flight under gravity alone for `t` seconds, as semi-implicit Euler with step `h` moves
+/// it (exact at multiples of `h`; `h = 0` is the continuous parabola): horizontal motion is exact,
+/// `z = z0 + v0·t − ½·g·t·(t + h)`, and the velocity is `v0 − g·t`. The one place this closed
+/// form is written: the predictor and the serves use it, the flight is tested against it.
+pub fn vacuum_flight(pos: &V3, vel: &V3, t: f64, h: f64) -> (V3, V3) {
     let g = arena::GRAVITY;
-    let pos = V3::new(
-        start.pos.x + start.vel.x * t,
-        start.pos.y + start.vel.y * t,
-        start.pos.z + start.vel.z * t - 0.5 * g * t * (t + h),
-    );
-    let vel = V3::new(start.vel.x, start.vel.y, start.vel.z - g * t);
-    (pos, vel)
+    (
+        V3::new(
+            pos.x + vel.x * t,
+            pos.y + vel.y * t,
+            pos.z + vel.z * t - 0.5 * g * t * (t + h),
+        ),
+        V3::new(vel.x, vel.y, vel.z - g * t),
+    )
+}
+
+/// [`vacuum_flight`] after `n` steps of `h` from `start`.
+pub fn vacuum_flight_closed_form(start: &BallState, n: u32, h: f64) -> (V3, V3) {
+    vacuum_flight(&start.pos, &start.vel, n as f64 * h, h)
+}
+
+/// Time until a drag-free ball from height `z0` at vertical speed `vz` descends through height `z`
+/// under [`vacuum_flight`] with step `h` (the larger root of `½·g·t² − (vz − ½·g·h)·t − (z0 − z) = 0`);
+/// `None` if it never reaches it.
+pub fn descent_time(z0: f64, vz: f64, z: f64, h: f64) -> Option<f64> {
+    let g = arena::GRAVITY;
+    let b = vz - 0.5 * g * h;
+    let disc = b * b + 2.0 * g * (z0 - z);
+    if disc < 0.0 {
+        return None;
+    }
+    let t = (b + disc.sqrt()) / g;
+    (t >= 0.0).then_some(t)
 }

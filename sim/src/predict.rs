@@ -62,30 +62,13 @@ impl BounceModel {
 /// Ball state after `t` seconds of drag-free flight from `(pos, vel)`: the semi-implicit Euler
 /// closed form `z = z0 + v0·t − ½·g·t·(t + h)`, exact at multiples of the timestep.
 pub fn flight(pos: &V3, vel: &V3, t: f64) -> (V3, V3) {
-    let g = arena::GRAVITY;
-    let h = arena::TIMESTEP;
-    (
-        V3::new(
-            pos.x + vel.x * t,
-            pos.y + vel.y * t,
-            pos.z + vel.z * t - 0.5 * g * t * (t + h),
-        ),
-        V3::new(vel.x, vel.y, vel.z - g * t),
-    )
+    crate::ball::vacuum_flight(pos, vel, t, arena::TIMESTEP)
 }
 
 /// Time until the ball, flying drag-free from height `z0` at vertical speed `vz`, descends through
 /// height `z`; `None` if it never reaches it.
 pub fn time_to_descend(z0: f64, vz: f64, z: f64) -> Option<f64> {
-    let g = arena::GRAVITY;
-    // ½·g·t² − (vz − ½·g·h)·t − (z0 − z) = 0, larger root.
-    let b = vz - 0.5 * g * arena::TIMESTEP;
-    let disc = b * b + 2.0 * g * (z0 - z);
-    if disc < 0.0 {
-        return None;
-    }
-    let t = (b + disc.sqrt()) / g;
-    (t >= 0.0).then_some(t)
+    crate::ball::descent_time(z0, vz, z, arena::TIMESTEP)
 }
 
 /// Whether a drag-free flight from `pos` with `vel` passes over the net (or beside it) when it crosses

@@ -81,8 +81,7 @@ fn uniform3(rng: &mut Rng, b: &[(f64, f64); 3]) -> V3 {
 
 /// Continuous-time fall time used by MyoSuite's P2 formula: from `z0` with `vz` down to `z`.
 fn p2_flight_time(z0: f64, vz: f64, z: f64) -> f64 {
-    let g = arena::GRAVITY;
-    (vz + (vz * vz + 2.0 * g * (z0 - z)).sqrt()) / g
+    crate::ball::descent_time(z0, vz, z, 0.0).unwrap_or(f64::NAN)
 }
 
 /// Generates a serve. Draw order: P1 and P2 draw position x, y, z; P2 then v_z, then aim x, y; a rally
