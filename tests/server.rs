@@ -454,7 +454,13 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     assert!(String::from_utf8_lossy(&page).contains("<table id=\"board\">"));
     let (code, viewer) = raw(a, "GET", "/replay?match=1&rally=0", &[], b"");
     assert_eq!(code, 200);
-    assert!(String::from_utf8_lossy(&viewer).contains("<canvas id=\"top\""));
+    assert!(String::from_utf8_lossy(&viewer).contains("<canvas id=\"view\""));
+    // What the 3D viewer draws the robots with.
+    let (code, robot) = call(a, "GET", "/api/v1/model", None, None);
+    assert_eq!(code, 200);
+    assert_eq!(robot["muscles"].as_array().unwrap().len(), 75, "{robot}");
+    assert!(robot["geoms"].as_array().unwrap().len() >= 10);
+    assert!(robot["paddle_body"].is_number());
     let (code, agent_page) = raw(a, "GET", "/agent?id=1", &[], b"");
     assert_eq!(code, 200);
     assert!(String::from_utf8_lossy(&agent_page).contains("<svg id=\"cloud\""));
@@ -530,8 +536,19 @@ fn continuous_mode_fills_the_leaderboard() {
             let cli: Value =
                 serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
             assert!(!r["frames"].as_array().unwrap().is_empty());
+            // The server adds each frame's body poses (for the 3D viewer); the rest is the match's.
+            let mut frames = r["frames"].clone();
+            for f in frames.as_array_mut().unwrap() {
+                let f = f.as_object_mut().unwrap();
+                assert_eq!(
+                    f["bodies_a"].as_array().unwrap().len(),
+                    16,
+                    "one pose per body"
+                );
+                assert!(f.remove("bodies_a").is_some() && f.remove("bodies_b").is_some());
+            }
             assert_eq!(
-                r["frames"], cli["rallies"][1],
+                frames, cli["rallies"][1],
                 "server re-simulation vs rally match --replay"
             );
             break;

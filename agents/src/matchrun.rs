@@ -197,7 +197,8 @@ pub fn drift_stats(crossings: &[CrossingRecord]) -> DriftStats {
     }
 }
 
-/// A replay frame: ball, both paddles (position and quaternion w, x, y, z) and both robots' qpos.
+/// A replay frame: ball, both paddles (position and quaternion w, x, y, z), both robots' qpos and
+/// activations.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Frame {
     /// Time in the rally, s.
@@ -212,6 +213,10 @@ pub struct Frame {
     pub qpos_a: Vec<f64>,
     /// Robot B's joint positions.
     pub qpos_b: Vec<f64>,
+    /// Robot A's actuator activations (muscles; 0 for servos), for colouring its muscles.
+    pub act_a: Vec<f64>,
+    /// Robot B's activations.
+    pub act_b: Vec<f64>,
 }
 
 /// Everything a match produced.
@@ -259,6 +264,8 @@ fn frame(rally: &Rally, t0: f64) -> Frame {
         paddle_b: pose(&rally.arena.robots[1]),
         qpos_a: rally.arena.robots[0].state.qpos.clone(),
         qpos_b: rally.arena.robots[1].state.qpos.clone(),
+        act_a: rally.arena.robots[0].state.act.clone(),
+        act_b: rally.arena.robots[1].state.act.clone(),
     }
 }
 

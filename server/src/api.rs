@@ -179,6 +179,7 @@ pub fn router(state: AppState) -> Router {
         .route("/leaderboard", get(leaderboard))
         .route("/events", get(events))
         .route("/arena", get(arena))
+        .route("/model", get(robot_model))
         .route("/tokens", axum::routing::post(issue_token))
         .route("/metrics", get(metrics))
         .route("/openapi.json", get(openapi))
@@ -258,6 +259,82 @@ async fn arena(State(s): State<AppState>) -> Json<Value> {
         "ball_radius": a::BALL_RADIUS,
         "paddle": {"blade": cyl(&paddle.blade), "handle": cyl(&paddle.handle)},
     }))
+}
+
+/// `GET /model`: what a page needs to draw the robots — bodies (name, parent; `paddle` is drawn from
+/// the frames' paddle pose instead), every geom in its body's frame (kind, size, pos, quat w x y z),
+/// the sites and every muscle's path through them (the actuator index that colours it).
+async fn robot_model(State(s): State<AppState>) -> Json<Value> {
+    let m = &s.model;
+    let q = |q: &nalgebra::UnitQuaternion<f64>| json!([q.w, q.i, q.j, q.k]);
+    let v = |p: &nalgebra::Vector3<f64>| json!([p.x, p.y, p.z]);
+    let kind = |k: sim::model::GeomKind| match k {
+        sim::model::GeomKind::Sphere => "sphere",
+        sim::model::GeomKind::Capsule => "capsule",
+        sim::model::GeomKind::Cylinder => "cylinder",
+        sim::model::GeomKind::Box => "box",
+        sim::model::GeomKind::Plane => "plane",
+    };
+    let muscles: Vec<Value> = m
+        .muscles()
+        .filter_map(|(a, act)| match act.transmission {
+            sim::model::Transmission::Tendon(t) => {
+                Some(json!({"name": act.name, "actuator": a, "sites": m.tendons[t].sites}))
+            }
+            _ => None,
+        })
+        .collect();
+    Json(json!({
+        "name": m.name,
+        "paddle_body": m.body("paddle"),
+        "bodies": m.bodies.iter().map(|b| json!({"name": b.name, "parent": b.parent})).collect::<Vec<_>>(),
+        "geoms": m.geoms.iter().map(|g| json!({"body": g.body, "name": g.name, "kind": kind(g.kind),
+            "size": g.size, "pos": v(&g.pos), "quat": q(&g.quat)})).collect::<Vec<_>>(),
+        "sites": m.sites.iter().map(|st| json!({"body": st.body, "pos": v(&st.pos)})).collect::<Vec<_>>(),
+        "muscles": muscles,
+    }))
+}
+
+/// Adds each frame's body poses (world frame, `[x, y, z, qw, qx, qy, qz]` per body, rounded to
+/// 0.1 mm and 1e-5) for robots A and B, computed from the frame's joint positions with the
+/// simulator's kinematics and placed by each side's frame.
+fn with_body_poses(model: &sim::model::Model, frames: &str) -> Result<String, String> {
+    let mut frames: Vec<Value> = serde_json::from_str(frames).map_err(|e| e.to_string())?;
+    let mut kin = sim::kinematics::Kinematics::new(model);
+    let round = |x: f64, k: f64| (x * k).round() / k;
+    for f in frames.iter_mut() {
+        for (key, out, side) in [
+            ("qpos_a", "bodies_a", sim::arena::Side::A),
+            ("qpos_b", "bodies_b", sim::arena::Side::B),
+        ] {
+            let Some(qpos) = f[key].as_array() else {
+                continue;
+            };
+            let qpos: Vec<f64> = qpos.iter().filter_map(Value::as_f64).collect();
+            if qpos.len() != model.nq {
+                continue;
+            }
+            kin.update(model, &qpos);
+            let frame = sim::robot::SideFrame::new(side);
+            let poses: Vec<Value> = (0..model.bodies.len())
+                .map(|b| {
+                    let p = frame.point_to_world(&kin.xpos[b]);
+                    let r = frame.rotation_to_world(&kin.xquat[b]);
+                    json!([
+                        round(p.x, 1e4),
+                        round(p.y, 1e4),
+                        round(p.z, 1e4),
+                        round(r.w, 1e5),
+                        round(r.i, 1e5),
+                        round(r.j, 1e5),
+                        round(r.k, 1e5)
+                    ])
+                })
+                .collect();
+            f[out] = Value::Array(poses);
+        }
+    }
+    serde_json::to_string(&frames).map_err(|e| e.to_string())
 }
 
 async fn get_agent(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Json<Value>> {
@@ -827,6 +904,11 @@ async fn get_replay(
         let json = serde_json::to_string(&frames).map_err(|e| anyhow::anyhow!("{e}"))?;
         (json, true)
     };
+    let model = s.model.clone();
+    let frames = tokio::task::spawn_blocking(move || with_body_poses(&model, &frames))
+        .await
+        .map_err(|e| anyhow::anyhow!("replay poses panicked: {e}"))?
+        .map_err(|e| anyhow::anyhow!("stored replay unreadable: {e}"))?;
     let body = format!(
         "{{\"match\":{id},\"rally\":{rally},\"hz\":{},\"resimulated\":{resimulated},\"frames\":{frames}}}",
         agents::matchrun::REPLAY_HZ

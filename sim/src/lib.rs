@@ -47,5 +47,6 @@ pub use world::{BallWorld, Paddle};
 /// Version of the simulator's physics and players, recorded with every match so it can be
 /// re-simulated. A change that alters any trajectory must bump it: `agents/tests/goldens.rs` fails
 /// when a served ball, a scripted episode or a 10-rally match changes while it stays the same
-/// (0.2.0: the first version its goldens pin; 0.1.0 covered several dynamics).
-pub const SIM_VERSION: &str = "0.2.0";
+/// (0.2.0: the first version its goldens pin; 0.1.0 covered several dynamics; 0.3.0: replay frames
+/// carry both robots' activations).
+pub const SIM_VERSION: &str = "0.3.0";
