@@ -1811,3 +1811,80 @@ fn the_event_stream_tells_a_match_queued_running_and_done() {
     let (_, got) = call(a, "GET", &format!("/api/v1/matches/{id}"), None, None);
     assert_eq!(got["status"], "done");
 }
+
+#[test]
+fn a_running_match_can_be_watched_live_rally_by_rally() {
+    let dir = tempdir("live");
+    let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    // A long match, so that it is still running when we subscribe.
+    let (code, m) = call(
+        a,
+        "POST",
+        "/api/v1/matches",
+        Some(&json!({"a": "scripted", "b": "scripted-drive", "rallies": 120, "seed": 5})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 202, "{m}");
+    let id = m["id"].as_i64().unwrap();
+    wait_for(a, id, "running", Duration::from_secs(30));
+    let mut sub = TcpStream::connect(a).unwrap();
+    sub.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    write!(
+        sub,
+        "GET /api/v1/matches/{id}/live HTTP/1.1\r\nHost: {a}\r\nAccept: text/event-stream\r\n\r\n"
+    )
+    .unwrap();
+    let mut reader = BufReader::new(sub);
+    let mut head = String::new();
+    while reader.read_line(&mut head).unwrap() > 2 && !head.ends_with("\r\n\r\n") {}
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    // Two rallies arrive, each with its record and frames carrying body poses.
+    let mut rallies = Vec::new();
+    let mut event = String::new();
+    let started = Instant::now();
+    while rallies.len() < 2 {
+        assert!(started.elapsed() < Duration::from_secs(60));
+        let mut line = String::new();
+        reader.read_line(&mut line).unwrap();
+        if let Some(name) = line.trim().strip_prefix("event:") {
+            event = name.trim().to_string();
+        } else if let Some(data) = line.trim().strip_prefix("data:") {
+            if event == "rally" {
+                let r: Value = serde_json::from_str(data.trim()).unwrap();
+                assert_eq!(r["match"], id);
+                assert!(r["record"]["length"].is_number(), "{r}");
+                let frames = r["frames"].as_array().unwrap();
+                assert!(!frames.is_empty() && frames[0]["bodies_a"].is_array());
+                rallies.push(r["rally"].as_i64().unwrap());
+            }
+        }
+    }
+    assert!(rallies[1] > rallies[0], "{rallies:?}");
+    // Cancelling ends the match; its feed ends for the viewer; a finished match has no live feed.
+    let (code, _) = call(
+        a,
+        "DELETE",
+        &format!("/api/v1/matches/{id}"),
+        None,
+        Some(TOKEN),
+    );
+    assert_eq!(code, 200);
+    wait_for(a, id, "cancelled", Duration::from_secs(60));
+    let mut ended = false;
+    let started = Instant::now();
+    while !ended && started.elapsed() < Duration::from_secs(90) {
+        let mut line = String::new();
+        if reader.read_line(&mut line).unwrap_or(0) == 0 {
+            break;
+        }
+        ended = line.trim() == "event: end" || line.trim() == "event:end";
+    }
+    assert!(ended, "the feed says the match ended");
+    let (code, e) = call(a, "GET", &format!("/api/v1/matches/{id}/live"), None, None);
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (409, Some("not_running")),
+        "{e}"
+    );
+}

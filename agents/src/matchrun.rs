@@ -280,15 +280,19 @@ pub fn play_match(
         a.build(&spec.model, &spec.preset, 0)?,
         b.build(&spec.model, &spec.preset, 0)?,
     ];
-    play_match_with(spec, players, [a.name(), b.name()], progress)
+    play_match_with(spec, players, [a.name(), b.name()], &mut |k, _, _| {
+        progress(k)
+    })
 }
 
-/// [`play_match`] with players already built (named for the record).
+/// [`play_match`] with players already built (named for the record); `on_rally(k, record, frames)`
+/// is called after rally k with its record and replay frames (empty unless `spec.replay`), e.g. to
+/// show a running match live.
 pub fn play_match_with(
     spec: &MatchSpec,
     mut players: [Box<dyn Player>; 2],
     names: [String; 2],
-    progress: &mut dyn FnMut(u32),
+    on_rally: &mut dyn FnMut(u32, &RallyRecord, &[Frame]),
 ) -> Result<(MatchRecord, Replay), String> {
     let mut rally = Rally::new(spec.model.clone(), &spec.config, spec.preset)?;
     let mut records = Vec::new();
@@ -302,9 +306,9 @@ pub fn play_match_with(
                 Side::B => 0,
             }] += 1;
         }
+        on_rally(k, &record, &frames);
         records.push(record);
         replay.push(frames);
-        progress(k);
     }
     let all: Vec<CrossingRecord> = records
         .iter()

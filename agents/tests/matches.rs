@@ -99,7 +99,7 @@ fn a_player_producing_nan_loses_with_invalid_action_and_nothing_crashes() {
         &s,
         [good, Box::new(Nan)],
         ["scripted".into(), "nan".into()],
-        &mut |_| {},
+        &mut |_, _, _| {},
     )
     .unwrap();
     for rally in &r.rallies {

@@ -166,6 +166,7 @@ pub fn router(state: AppState) -> Router {
         .route("/matches", get(list_matches).post(queue_match))
         .route("/matches/{id}", get(get_match).delete(cancel_match))
         .route("/matches/{id}/replay", get(get_replay))
+        .route("/matches/{id}/live", get(live_match))
         .route(
             "/tournaments",
             get(list_tournaments).post(create_tournament),
@@ -298,7 +299,7 @@ async fn robot_model(State(s): State<AppState>) -> Json<Value> {
 /// Adds each frame's body poses (world frame, `[x, y, z, qw, qx, qy, qz]` per body, rounded to
 /// 0.1 mm and 1e-5) for robots A and B, computed from the frame's joint positions with the
 /// simulator's kinematics and placed by each side's frame.
-fn with_body_poses(model: &sim::model::Model, frames: &str) -> Result<String, String> {
+pub(crate) fn with_body_poses(model: &sim::model::Model, frames: &str) -> Result<String, String> {
     let mut frames: Vec<Value> = serde_json::from_str(frames).map_err(|e| e.to_string())?;
     let mut kin = sim::kinematics::Kinematics::new(model);
     let round = |x: f64, k: f64| (x * k).round() / k;
@@ -335,6 +336,53 @@ fn with_body_poses(model: &sim::model::Model, frames: &str) -> Result<String, St
         }
     }
     serde_json::to_string(&frames).map_err(|e| e.to_string())
+}
+
+/// `GET /matches/{id}/live`: a running match as it is played (server-sent events): an event `rally`
+/// per finished rally (its record and frames with body poses, as the replay endpoint gives them),
+/// `lagged` when this viewer fell more than `LIVE_BUFFER` rallies behind (it goes on from the
+/// newest), and `end` when the match is over. 409 if the match is not running. The worker never
+/// waits for a viewer.
+async fn live_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Response> {
+    use axum::response::sse::{Event, KeepAlive, Sse};
+    use tokio::sync::broadcast::error::RecvError;
+    let id = parse_id(&id, "id")?;
+    let m = db::match_row(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("match", id))?;
+    let rx = s
+        .live
+        .lock()
+        .map_err(|_| anyhow::anyhow!("live registry poisoned"))?
+        .get(&id)
+        .map(|tx| tx.subscribe());
+    let Some(rx) = rx else {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_running",
+            format!(
+                "match {id} is {}: only a running match can be watched live (its replay: /replay?match={id})",
+                m.status
+            ),
+        ));
+    };
+    let stream = futures_util::stream::unfold(Some(rx), |rx| async move {
+        let mut rx = rx?;
+        let event = match rx.recv().await {
+            Ok(msg) => Event::default().event("rally").data(msg.as_str()),
+            Err(RecvError::Lagged(n)) => Event::default().event("lagged").data(n.to_string()),
+            Err(RecvError::Closed) => {
+                return Some((
+                    Ok::<_, std::convert::Infallible>(Event::default().event("end").data("{}")),
+                    None,
+                ))
+            }
+        };
+        Some((Ok(event), Some(rx)))
+    });
+    Ok(Sse::new(stream)
+        .keep_alive(KeepAlive::new().interval(std::time::Duration::from_secs(15)))
+        .into_response())
 }
 
 async fn get_agent(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Json<Value>> {

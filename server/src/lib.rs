@@ -133,6 +133,12 @@ pub struct ServerEvent {
 /// Events kept for a slow subscriber before it starts missing some (it is told, and refreshes).
 pub const EVENT_BUFFER: usize = 256;
 
+/// A running match's live feed: one JSON message per finished rally.
+pub type LiveChannel = tokio::sync::broadcast::Sender<Arc<String>>;
+
+/// Rallies a live viewer may fall behind before it skips to the newest (the worker never waits).
+pub const LIVE_BUFFER: usize = 4;
+
 impl AppState {
     /// Publishes an event to every subscriber; never waits (a subscriber that lags loses the oldest
     /// events, not the sender's time), and having no subscriber is fine.
@@ -165,6 +171,9 @@ pub struct AppState {
     pub qualify: Arc<tokio::sync::Semaphore>,
     /// What changed, for the event stream's subscribers.
     pub events: tokio::sync::broadcast::Sender<ServerEvent>,
+    /// Running matches that can be watched live: each finished rally (record and frames with body
+    /// poses, as JSON) goes to the match's channel, which its worker drops when the match ends.
+    pub live: Arc<std::sync::Mutex<std::collections::HashMap<i64, LiveChannel>>>,
     /// Replays of matches that kept no frames are re-simulated, as many at a time as there are workers.
     pub resim: Arc<tokio::sync::Semaphore>,
 }
@@ -230,6 +239,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
         qualify: Arc::new(tokio::sync::Semaphore::new(1)),
         events: tokio::sync::broadcast::channel(EVENT_BUFFER).0,
+        live: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),
     };
     db::register_builtins(&state.pool).await?;

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use agents::factory::PlayerSpec;
-use agents::matchrun::{play_match, MatchSpec};
+use agents::matchrun::MatchSpec;
 use tokio::sync::{Mutex, Notify};
 use tokio::task::JoinHandle;
 
@@ -59,14 +59,56 @@ pub fn match_spec(state: &AppState, m: &db::Match) -> Result<MatchSpec, String> 
     })
 }
 
-/// Plays stored match `m` to completion (blocking: call it off the async runtime).
+/// Plays stored match `m` to completion (blocking: call it off the async runtime). Each finished
+/// rally goes to the match's live channel while anyone watches (frames with body poses; the frames
+/// are recorded for that even when the match stores none, which changes no result).
 pub fn play(
     state: &AppState,
     m: &db::Match,
     a: &PlayerSpec,
     b: &PlayerSpec,
 ) -> Result<(agents::matchrun::MatchRecord, agents::matchrun::Replay), String> {
-    play_match(&match_spec(state, m)?, a, b, &mut |_| {})
+    let spec = agents::matchrun::MatchSpec {
+        replay: true,
+        ..match_spec(state, m)?
+    };
+    let live = state
+        .live
+        .lock()
+        .map_err(|_| "live registry poisoned".to_string())?
+        .get(&m.id)
+        .cloned();
+    let players = [
+        a.build(&spec.model, &spec.preset, 0)?,
+        b.build(&spec.model, &spec.preset, 0)?,
+    ];
+    let (record, mut replay) = agents::matchrun::play_match_with(
+        &spec,
+        players,
+        [a.name(), b.name()],
+        &mut |k, rally, frames| {
+            if let Some(tx) = live.as_ref().filter(|tx| tx.receiver_count() > 0) {
+                let frames = serde_json::to_string(frames)
+                    .map_err(|e| e.to_string())
+                    .and_then(|f| crate::api::with_body_poses(&state.model, &f));
+                if let Ok(frames) = frames {
+                    let msg = format!(
+                        "{{\"match\":{},\"rally\":{k},\"rallies\":{},\"hz\":{},\"record\":{},\"frames\":{frames}}}",
+                        m.id,
+                        m.rallies,
+                        agents::matchrun::REPLAY_HZ,
+                        serde_json::to_string(rally).unwrap_or_else(|_| "null".into())
+                    );
+                    // A full channel drops its oldest message for a lagging viewer; never waits.
+                    let _ = tx.send(Arc::new(msg));
+                }
+            }
+        },
+    )?;
+    if !m.keep_replay {
+        replay.iter_mut().for_each(Vec::clear);
+    }
+    Ok((record, replay))
 }
 
 /// Re-simulates rally `k` of finished match `m` with replay frames (blocking), after checking that
@@ -114,6 +156,19 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
     let st = state.clone();
     let id = m.id;
     let started = std::time::Instant::now();
+    if let Ok(mut live) = state.live.lock() {
+        live.insert(id, tokio::sync::broadcast::channel(crate::LIVE_BUFFER).0);
+    }
+    // Dropping the channel when this function returns ends every live viewer's stream.
+    struct Unregister(AppState, i64);
+    impl Drop for Unregister {
+        fn drop(&mut self) {
+            if let Ok(mut live) = self.0.live.lock() {
+                live.remove(&self.1);
+            }
+        }
+    }
+    let _unregister = Unregister(state.clone(), id);
     let result = tokio::task::spawn_blocking(move || {
         let a = player_spec(&st, &ka, &sa)?;
         let b = player_spec(&st, &kb, &sb)?;

@@ -2,7 +2,8 @@
 // `rally serve` (a child process on a loopback port, a fresh SQLite file, the built-in agents)
 // seeded with finished matches. Checks that every page loads without console errors and shows the
 // agents' names and numbers, that the replay canvas draws and changes when played, that the
-// leaderboard updates without a reload when a match finishes (server-sent events), and that the pages
+// leaderboard updates without a reload when a match finishes (server-sent events), that a running
+// match can be watched live, and that the pages
 // fit 1280×800 and a phone's width. Screenshots go to $ARTIFACTS (default target/browser).
 //
 // Usage (from the repository root, after `cargo build` or `cargo test`):
@@ -156,6 +157,26 @@ try {
     check((await page.inputValue('#camera')) === 'top', 'keyboard: 4 selects the top camera');
     await page.screenshot({ path: join(artifacts, 'replay.png') });
     check(errors.length === 0, `replay: no console errors ${JSON.stringify(errors)}`);
+    await page.close();
+  }
+
+  // --- live: a running match's rallies reach the viewer as they are played
+  {
+    const long = await api('POST', '/matches', { a: 'scripted', b: 'scripted-drive', rallies: 150, seed: 10 });
+    for (let i = 0; i < 300 && (await api('GET', `/matches/${long.id}`)).status !== 'running'; i++) await new Promise(r => setTimeout(r, 100));
+    const { page, errors } = await open(`/replay?match=${long.id}&live=1`);
+    const got = await page.waitForFunction(() => /live: rally \d+ of 150/.test(document.querySelector('#msg').textContent), null, { timeout: 30000 })
+      .then(() => true, () => false);
+    check(got, `the live view receives rallies of a running match (${await page.textContent('#msg')})`);
+    await page.waitForTimeout(400);
+    const ink = await page.evaluate(() => {
+      const c = document.querySelector('#view'), d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+      let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n;
+    });
+    check(ink > 10000, `the live view draws the robots (${ink} painted pixels)`);
+    await page.screenshot({ path: join(artifacts, 'live.png') });
+    await api('DELETE', `/matches/${long.id}`);
+    check(errors.length === 0, `live view: no console errors ${JSON.stringify(errors)}`);
     await page.close();
   }
 
