@@ -14,7 +14,7 @@ use axum::{Json, Router};
 use serde::Deserialize;
 use serde_json::{json, Value};
 
-use crate::{db, ratings, AppState, Budget};
+use crate::{db, AppState, Budget};
 
 mod contests;
 use contests::{
@@ -294,48 +294,6 @@ async fn robot_model(State(s): State<AppState>) -> Json<Value> {
         "sites": m.sites.iter().map(|st| json!({"body": st.body, "pos": v(&st.pos)})).collect::<Vec<_>>(),
         "muscles": muscles,
     }))
-}
-
-/// Adds each frame's body poses (world frame, `[x, y, z, qw, qx, qy, qz]` per body, rounded to
-/// 0.1 mm and 1e-5) for robots A and B, computed from the frame's joint positions with the
-/// simulator's kinematics and placed by each side's frame.
-pub(crate) fn with_body_poses(model: &sim::model::Model, frames: &str) -> Result<String, String> {
-    let mut frames: Vec<Value> = serde_json::from_str(frames).map_err(|e| e.to_string())?;
-    let mut kin = sim::kinematics::Kinematics::new(model);
-    let round = |x: f64, k: f64| (x * k).round() / k;
-    for f in frames.iter_mut() {
-        for (key, out, side) in [
-            ("qpos_a", "bodies_a", sim::arena::Side::A),
-            ("qpos_b", "bodies_b", sim::arena::Side::B),
-        ] {
-            let Some(qpos) = f[key].as_array() else {
-                continue;
-            };
-            let qpos: Vec<f64> = qpos.iter().filter_map(Value::as_f64).collect();
-            if qpos.len() != model.nq {
-                continue;
-            }
-            kin.update(model, &qpos);
-            let frame = sim::robot::SideFrame::new(side);
-            let poses: Vec<Value> = (0..model.bodies.len())
-                .map(|b| {
-                    let p = frame.point_to_world(&kin.xpos[b]);
-                    let r = frame.rotation_to_world(&kin.xquat[b]);
-                    json!([
-                        round(p.x, 1e4),
-                        round(p.y, 1e4),
-                        round(p.z, 1e4),
-                        round(r.w, 1e5),
-                        round(r.i, 1e5),
-                        round(r.j, 1e5),
-                        round(r.k, 1e5)
-                    ])
-                })
-                .collect();
-            f[out] = Value::Array(poses);
-        }
-    }
-    serde_json::to_string(&frames).map_err(|e| e.to_string())
 }
 
 /// `GET /matches/{id}/live`: a running match as it is played (server-sent events): an event `rally`
@@ -953,10 +911,11 @@ async fn get_replay(
         (json, true)
     };
     let model = s.model.clone();
-    let frames = tokio::task::spawn_blocking(move || with_body_poses(&model, &frames))
-        .await
-        .map_err(|e| anyhow::anyhow!("replay poses panicked: {e}"))?
-        .map_err(|e| anyhow::anyhow!("stored replay unreadable: {e}"))?;
+    let frames =
+        tokio::task::spawn_blocking(move || crate::replay::with_body_poses(&model, &frames))
+            .await
+            .map_err(|e| anyhow::anyhow!("replay poses panicked: {e}"))?
+            .map_err(|e| anyhow::anyhow!("stored replay unreadable: {e}"))?;
     let body = format!(
         "{{\"match\":{id},\"rally\":{rally},\"hz\":{},\"resimulated\":{resimulated},\"frames\":{frames}}}",
         agents::matchrun::REPLAY_HZ
@@ -964,42 +923,8 @@ async fn get_replay(
     Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())
 }
 
-/// The leaderboard, recomputed when an agent or a finished match was added.
-pub async fn current_board(s: &AppState) -> ApiResult<Arc<ratings::Leaderboard>> {
-    let (agents_n, done): (i64, i64) = sqlx::query_as("SELECT (SELECT COUNT(*) FROM agents), (SELECT COUNT(*) FROM matches WHERE status = 'done')")
-        .fetch_one(&s.pool)
-        .await?;
-    let mut cache = s.board.lock().await;
-    if let Some((a, d, b)) = cache.as_ref() {
-        if *a == agents_n as usize && *d == done {
-            return Ok(b.clone());
-        }
-    }
-    let agents = db::agents(&s.pool).await?;
-    let outcomes = db::outcomes(&s.pool).await?;
-    let extras = ratings::Extras {
-        glicko: db::latest_glicko(&s.pool)
-            .await?
-            .into_iter()
-            .map(|(id, r, d)| (id, (r, d)))
-            .collect(),
-        drift: db::agent_drift(&s.pool)
-            .await?
-            .into_iter()
-            .map(|(id, b, e)| (id, (b, e)))
-            .collect(),
-    };
-    let board = Arc::new(
-        tokio::task::spawn_blocking(move || ratings::leaderboard(&agents, &outcomes, &extras))
-            .await
-            .map_err(|e| anyhow::anyhow!("{e}"))?,
-    );
-    *cache = Some((agents_n as usize, done, board.clone()));
-    Ok(board)
-}
-
 async fn leaderboard(State(s): State<AppState>) -> ApiResult<Json<Value>> {
-    Ok(Json(json!(*current_board(&s).await?)))
+    Ok(Json(json!(*crate::board::current_board(&s).await?)))
 }
 
 async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {

@@ -543,9 +543,19 @@ pub async fn drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<String>> {
     Ok(r.and_then(|x| x.0))
 }
 
-/// Per finished match: (agent A, agent B, points A, points B, mean rally length, max rally length,
-/// in-box fraction, energy distance).
-pub type Outcome = (i64, i64, i64, i64, f64, i64, Option<f64>, Option<f64>);
+pub use crate::ratings::Outcome;
+
+impl From<&Agent> for crate::ratings::Entrant {
+    fn from(a: &Agent) -> Self {
+        crate::ratings::Entrant {
+            id: a.id,
+            name: a.name.clone(),
+            builtin: a.builtin,
+            hit_rate: a.hit_rate,
+            success_rate: a.success_rate,
+        }
+    }
+}
 
 /// Every finished match's outcome.
 pub async fn outcomes(pool: &SqlitePool) -> sqlx::Result<Vec<Outcome>> {

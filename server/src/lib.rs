@@ -10,9 +10,11 @@
 #![forbid(unsafe_code)]
 
 pub mod api;
+pub mod board;
 pub mod db;
 pub mod page;
 pub mod ratings;
+pub mod replay;
 pub mod scheduler;
 pub mod tournament;
 

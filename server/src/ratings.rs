@@ -11,7 +11,24 @@ use std::collections::HashMap;
 
 use serde::Serialize;
 
-use crate::db::{Agent, Outcome};
+/// What the leaderboard knows of an agent (the store's agent row, minus what rating does not need).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Entrant {
+    /// Agent id.
+    pub id: i64,
+    /// Name.
+    pub name: String,
+    /// Registered by the server itself.
+    pub builtin: bool,
+    /// Qualification hit rate.
+    pub hit_rate: Option<f64>,
+    /// Qualification success rate.
+    pub success_rate: Option<f64>,
+}
+
+/// Per finished match: (agent A, agent B, points A, points B, mean rally length, max rally length,
+/// in-box fraction, energy distance).
+pub type Outcome = (i64, i64, i64, i64, f64, i64, Option<f64>, Option<f64>);
 
 /// Bootstrap resamples.
 pub const BOOTSTRAP: usize = 200;
@@ -127,7 +144,7 @@ pub struct Extras {
 }
 
 /// Computes the leaderboard of `agents` from the finished matches.
-pub fn leaderboard(agents: &[Agent], outcomes: &[Outcome], extras: &Extras) -> Leaderboard {
+pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) -> Leaderboard {
     let n = agents.len();
     let index = |id: i64| agents.iter().position(|a| a.id == id);
     let pairs: Vec<(usize, usize, f64, f64)> = outcomes

@@ -90,7 +90,7 @@ pub fn play(
             if let Some(tx) = live.as_ref().filter(|tx| tx.receiver_count() > 0) {
                 let frames = serde_json::to_string(frames)
                     .map_err(|e| e.to_string())
-                    .and_then(|f| crate::api::with_body_poses(&state.model, &f));
+                    .and_then(|f| crate::replay::with_body_poses(&state.model, &f));
                 if let Ok(frames) = frames {
                     let msg = format!(
                         "{{\"match\":{},\"rally\":{k},\"rallies\":{},\"hz\":{},\"record\":{},\"frames\":{frames}}}",
@@ -238,7 +238,7 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     }
     let outcomes = db::outcomes(&state.pool).await?;
     // The leaderboard the API serves (cached; recomputed off the async threads when it changed).
-    let board = crate::api::current_board(state)
+    let board = crate::board::current_board(state)
         .await
         .map_err(|e| anyhow::anyhow!("computing the leaderboard: {e:?}"))?;
     let width = |id: i64| {

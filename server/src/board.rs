@@ -1,0 +1,43 @@
+//! The leaderboard the API serves and continuous mode schedules by: computed from the agents and the
+//! finished matches off the async threads, cached until an agent or a finished match is added.
+
+use std::sync::Arc;
+
+use crate::{db, ratings, AppState};
+
+/// The leaderboard, recomputed when an agent or a finished match was added.
+pub async fn current_board(s: &AppState) -> anyhow::Result<Arc<ratings::Leaderboard>> {
+    let (agents_n, done): (i64, i64) = sqlx::query_as("SELECT (SELECT COUNT(*) FROM agents), (SELECT COUNT(*) FROM matches WHERE status = 'done')")
+        .fetch_one(&s.pool)
+        .await?;
+    let mut cache = s.board.lock().await;
+    if let Some((a, d, b)) = cache.as_ref() {
+        if *a == agents_n as usize && *d == done {
+            return Ok(b.clone());
+        }
+    }
+    let agents = db::agents(&s.pool).await?;
+    let outcomes = db::outcomes(&s.pool).await?;
+    let extras = ratings::Extras {
+        glicko: db::latest_glicko(&s.pool)
+            .await?
+            .into_iter()
+            .map(|(id, r, d)| (id, (r, d)))
+            .collect(),
+        drift: db::agent_drift(&s.pool)
+            .await?
+            .into_iter()
+            .map(|(id, b, e)| (id, (b, e)))
+            .collect(),
+    };
+    let board = Arc::new(
+        tokio::task::spawn_blocking(move || {
+            let entrants: Vec<ratings::Entrant> = agents.iter().map(Into::into).collect();
+            ratings::leaderboard(&entrants, &outcomes, &extras)
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("{e}"))?,
+    );
+    *cache = Some((agents_n as usize, done, board.clone()));
+    Ok(board)
+}
