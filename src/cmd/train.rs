@@ -105,23 +105,10 @@ pub fn read_config(path: &Path) -> Result<TrainConfig, CliError> {
     Ok(c)
 }
 
-/// The git commit of the working directory (`-dirty` when tracked files differ from it), or "unknown".
+/// The git commit this binary was built from (`-dirty` when tracked files differed from it at build
+/// time), or "unknown" outside a checkout; recorded by `build.rs`.
 pub fn git_commit() -> String {
-    let git = |args: &[&str]| {
-        std::process::Command::new("git")
-            .args(args)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
-    match git(&["rev-parse", "--short=12", "HEAD"]) {
-        Some(head) => match git(&["status", "--porcelain", "--untracked-files=no"]) {
-            Some(changes) if !changes.is_empty() => format!("{head}-dirty"),
-            _ => head,
-        },
-        None => "unknown".into(),
-    }
+    env!("RALLY_GIT_COMMIT").to_string()
 }
 
 fn status_line(r: &CurveRow, steps_per_s: f64, env: TrainEnv) -> String {
