@@ -1754,23 +1754,30 @@ fn a_builtin_checkpoint_that_does_not_load_is_skipped_not_fatal() {
     assert_eq!(names(&srv), first);
 }
 
-#[test]
-fn the_event_stream_tells_a_match_queued_running_and_done() {
-    let dir = tempdir("events");
-    let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
-    let a = srv.addr.as_str();
-    // Subscribe first (a raw HTTP/1.1 stream), then queue a match.
-    let mut sub = TcpStream::connect(a).unwrap();
+/// Opens a server-sent event stream (a raw HTTP/1.1 GET); its reader past the header block, which is
+/// returned too (asserted 200).
+fn subscribe(addr: &str, path: &str) -> (BufReader<TcpStream>, String) {
+    let mut sub = TcpStream::connect(addr).unwrap();
     sub.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
     write!(
         sub,
-        "GET /api/v1/events HTTP/1.1\r\nHost: {a}\r\nAccept: text/event-stream\r\n\r\n"
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nAccept: text/event-stream\r\n\r\n"
     )
     .unwrap();
     let mut reader = BufReader::new(sub);
     let mut head = String::new();
     while reader.read_line(&mut head).unwrap() > 2 && !head.ends_with("\r\n\r\n") {}
-    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    assert!(head.starts_with("HTTP/1.1 200"), "{path}: {head}");
+    (reader, head)
+}
+
+#[test]
+fn the_event_stream_tells_a_match_queued_running_and_done() {
+    let dir = tempdir("events");
+    let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    // Subscribe first, then queue a match.
+    let (mut reader, head) = subscribe(a, "/api/v1/events");
     assert!(
         head.to_ascii_lowercase().contains("text/event-stream"),
         "{head}"
@@ -1828,17 +1835,7 @@ fn a_running_match_can_be_watched_live_rally_by_rally() {
     assert_eq!(code, 202, "{m}");
     let id = m["id"].as_i64().unwrap();
     wait_for(a, id, "running", Duration::from_secs(30));
-    let mut sub = TcpStream::connect(a).unwrap();
-    sub.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    write!(
-        sub,
-        "GET /api/v1/matches/{id}/live HTTP/1.1\r\nHost: {a}\r\nAccept: text/event-stream\r\n\r\n"
-    )
-    .unwrap();
-    let mut reader = BufReader::new(sub);
-    let mut head = String::new();
-    while reader.read_line(&mut head).unwrap() > 2 && !head.ends_with("\r\n\r\n") {}
-    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    let (mut reader, _) = subscribe(a, &format!("/api/v1/matches/{id}/live"));
     // Two rallies arrive, each with its record and frames carrying body poses.
     let mut rallies = Vec::new();
     let mut event = String::new();
