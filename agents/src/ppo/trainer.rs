@@ -289,7 +289,14 @@ fn make_env(
     controller: &ControllerSpec,
     config: &TrainConfig,
 ) -> Result<(TrainingEnv, usize, usize), String> {
-    match config.env {
+    // Both environments: the default arena, MyoChallenge contact laws, every observation block.
+    let (arena, preset, blocks) = (
+        ArenaConfig::default(),
+        sim::arena::MYOCHALLENGE,
+        ObsBlock::ALL.to_vec(),
+    );
+    let grip_floor = config.controller.grip_floor;
+    Ok(match config.env {
         TrainEnv::Single => {
             let kind = match config.serve {
                 TrainServe::P2 => ServeKind::P2,
@@ -299,32 +306,32 @@ fn make_env(
             };
             let mut env = Env::new(
                 model.clone(),
-                &ArenaConfig::default(),
-                sim::arena::MYOCHALLENGE,
+                &arena,
+                preset,
                 controller,
-                ObsBlock::ALL.to_vec(),
+                blocks,
                 config.reward,
                 kind,
             )?;
             env.end = EpisodeEnd::Training;
-            env.grip_floor = config.controller.grip_floor;
-            let dims = (env.obs_dim(), env.action_dim());
-            Ok((TrainingEnv::Single(Box::new(env)), dims.0, dims.1))
+            env.grip_floor = grip_floor;
+            let (o, a) = (env.obs_dim(), env.action_dim());
+            (TrainingEnv::Single(Box::new(env)), o, a)
         }
         TrainEnv::Rally => {
             let mut env = RallyEnv::new(
                 model.clone(),
-                &ArenaConfig::default(),
-                sim::arena::MYOCHALLENGE,
+                &arena,
+                preset,
                 controller,
-                ObsBlock::ALL.to_vec(),
+                blocks,
                 config.reward,
             )?;
-            env.grip_floor = config.controller.grip_floor;
-            let dims = (env.obs_dim(), env.action_dim());
-            Ok((TrainingEnv::Rally(Box::new(env)), dims.0, dims.1))
+            env.grip_floor = grip_floor;
+            let (o, a) = (env.obs_dim(), env.action_dim());
+            (TrainingEnv::Rally(Box::new(env)), o, a)
         }
-    }
+    })
 }
 
 fn e(err: candle_core::Error) -> String {
