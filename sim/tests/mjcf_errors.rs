@@ -171,6 +171,44 @@ fn includes_are_spliced_and_their_errors_name_the_included_file() {
     assert!(e.message.contains("nested"), "{e}");
 }
 
+/// Found reading the loader while writing the fuzz targets (ISSUES 13 item 6; a fuzzer whose every
+/// include reads its own input only ever meets the cycle): the depth limit stops cycles, but a file
+/// that includes the next one ten times, sixteen levels down, asked for 10¹⁶ reads. A load now reads
+/// at most 256 included files.
+#[test]
+fn include_fan_out_is_bounded() {
+    let reads = std::cell::Cell::new(0usize);
+    let read = |p: &Path| -> std::io::Result<String> {
+        reads.set(reads.get() + 1);
+        let level: usize = p.file_stem().unwrap().to_str().unwrap()[1..]
+            .parse()
+            .unwrap();
+        if level == 15 {
+            return Ok(format!(
+                "<mujoco>\n<worldbody>\n{GOOD_BODY}\n</worldbody>\n</mujoco>"
+            ));
+        }
+        let next = format!("<include file=\"l{}.xml\"/>\n", level + 1);
+        Ok(format!("<mujoco>\n{}</mujoco>", next.repeat(10)))
+    };
+    let e = mjcf::load(Path::new("l0.xml"), &read).unwrap_err();
+    assert!(e.message.contains("more than 256 files"), "{e}");
+    assert!(reads.get() <= 257, "{} reads", reads.get());
+    // Within the limit, a fan-out still loads: 2 × 2 includes of the same part are 7 files.
+    let small = |p: &Path| -> std::io::Result<String> {
+        Ok(match p.to_str().unwrap() {
+            "main.xml" => {
+                "<mujoco><include file=\"mid.xml\"/><include file=\"mid.xml\"/></mujoco>".into()
+            }
+            "mid.xml" => {
+                "<mujoco><include file=\"leaf.xml\"/><include file=\"leaf.xml\"/></mujoco>".into()
+            }
+            _ => "<mujoco><option timestep=\"0.002\"/></mujoco>".into(),
+        })
+    };
+    mjcf::load(Path::new("main.xml"), &small).expect("seven files load");
+}
+
 #[test]
 fn defaults_and_childclass_apply_like_mujoco() {
     let m = mjcf::parse_str(

@@ -19,7 +19,7 @@ use std::path::Path;
 
 use crate::model::Model;
 use compiler::compile;
-use reader::{parse_tree, read_tree};
+use reader::{parse_tree, read_tree, Nesting};
 
 /// A model that could not be loaded: where and why.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,7 +48,16 @@ type Result<T> = std::result::Result<T, MjcfError>;
 
 /// Loads the model file at `path`, reading it and anything it includes through `read`.
 pub fn load(path: &Path, read: &dyn Fn(&Path) -> std::io::Result<String>) -> Result<Model> {
-    let root = read_tree(path, read, 0, None)?;
+    let files = std::cell::Cell::new(0);
+    let root = read_tree(
+        path,
+        read,
+        Nesting {
+            depth: 0,
+            files: &files,
+        },
+        None,
+    )?;
     compile(&root)
 }
 
@@ -60,6 +69,15 @@ pub fn parse_str(text: &str, name: &str) -> Result<Model> {
             format!("cannot include {} from a string", p.display()),
         ))
     };
-    let root = parse_tree(text, Path::new(name), &no_files, 0)?;
+    let files = std::cell::Cell::new(0);
+    let root = parse_tree(
+        text,
+        Path::new(name),
+        &no_files,
+        Nesting {
+            depth: 0,
+            files: &files,
+        },
+    )?;
     compile(&root)
 }

@@ -65,10 +65,21 @@ impl Elem {
 
 pub(crate) const MAX_INCLUDE_DEPTH: usize = 16;
 
+/// The most files one load may read through `<include>` in all. Depth alone does not bound the
+/// work: a file that includes the next one ten times, sixteen levels down, asks for 10¹⁶ reads.
+pub(crate) const MAX_INCLUDED_FILES: usize = 256;
+
+/// Where an element sits among includes: how deep, and how many files the load has read so far.
+#[derive(Clone, Copy)]
+pub(crate) struct Nesting<'a> {
+    pub(crate) depth: usize,
+    pub(crate) files: &'a std::cell::Cell<usize>,
+}
+
 pub(crate) fn read_tree(
     path: &Path,
     read: &dyn Fn(&Path) -> std::io::Result<String>,
-    depth: usize,
+    nest: Nesting,
     from: Option<&Src>,
 ) -> Result<Elem> {
     let text = read(path).map_err(|e| {
@@ -82,14 +93,14 @@ pub(crate) fn read_tree(
             },
         }
     })?;
-    parse_tree(&text, path, read, depth)
+    parse_tree(&text, path, read, nest)
 }
 
 pub(crate) fn parse_tree(
     text: &str,
     path: &Path,
     read: &dyn Fn(&Path) -> std::io::Result<String>,
-    depth: usize,
+    nest: Nesting,
 ) -> Result<Elem> {
     let file: Rc<str> = Rc::from(path.display().to_string());
     let doc = roxmltree::Document::parse(text).map_err(|e| MjcfError {
@@ -109,7 +120,7 @@ pub(crate) fn parse_tree(
             root.tag_name().name()
         )));
     }
-    convert(&lines, root, &file, path, read, depth)
+    convert(&lines, root, &file, path, read, nest)
 }
 
 /// Byte offset → 1-based line, by binary search over the line starts (roxmltree's own lookup scans
@@ -136,7 +147,7 @@ pub(crate) fn convert(
     file: &Rc<str>,
     path: &Path,
     read: &dyn Fn(&Path) -> std::io::Result<String>,
-    depth: usize,
+    nest: Nesting,
 ) -> Result<Elem> {
     let src = Src {
         file: file.clone(),
@@ -155,14 +166,24 @@ pub(crate) fn convert(
             if let Some(a) = child.attributes().find(|a| a.name() != "file") {
                 return Err(csrc.err(format!("<include>: unsupported attribute '{}'", a.name())));
             }
-            if depth >= MAX_INCLUDE_DEPTH {
+            if nest.depth >= MAX_INCLUDE_DEPTH {
                 return Err(csrc.err(format!("<include file=\"{f}\">: includes nested more than {MAX_INCLUDE_DEPTH} deep (a cycle?)")));
             }
+            if nest.files.get() >= MAX_INCLUDED_FILES {
+                return Err(csrc.err(format!(
+                    "<include file=\"{f}\">: the model includes more than {MAX_INCLUDED_FILES} files in all"
+                )));
+            }
+            nest.files.set(nest.files.get() + 1);
             let target: PathBuf = path.parent().unwrap_or(Path::new("")).join(f);
-            let included = read_tree(&target, read, depth + 1, Some(&csrc))?;
+            let inner = Nesting {
+                depth: nest.depth + 1,
+                files: nest.files,
+            };
+            let included = read_tree(&target, read, inner, Some(&csrc))?;
             children.extend(included.children);
         } else {
-            children.push(convert(lines, child, file, path, read, depth)?);
+            children.push(convert(lines, child, file, path, read, nest)?);
         }
     }
     Ok(Elem {
