@@ -25,6 +25,7 @@ pub mod matchrun;
 pub mod observation;
 pub mod planner;
 pub mod player;
+#[cfg(feature = "train")]
 pub mod ppo;
 pub mod scripted;
 pub mod seeds;

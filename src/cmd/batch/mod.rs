@@ -10,10 +10,12 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Context};
 use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use serde::Deserialize;
 use serde_json::{json, Value};
 
 use super::CliError;
+
+mod plan;
+use plan::{jobs, Job};
 
 /// Arguments of `rally batch`.
 #[derive(Args, Debug)]
@@ -68,76 +70,6 @@ fn parse_timeout(s: &str) -> Result<f64, String> {
         return Err("must be a positive number of seconds".into());
     }
     Ok(x)
-}
-
-/// An agent in a plan: its name or its id.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(untagged)]
-enum AgentRef {
-    Id(i64),
-    Name(String),
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Plan {
-    #[serde(default = "default_rallies")]
-    rallies: u32,
-    #[serde(default = "default_seed")]
-    seed: u64,
-    #[serde(default, rename = "match")]
-    matches: Vec<PlanMatch>,
-    #[serde(default, rename = "tournament")]
-    tournaments: Vec<PlanTournament>,
-    #[serde(default, rename = "sprt")]
-    sprts: Vec<PlanSprt>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PlanSprt {
-    a: AgentRef,
-    b: AgentRef,
-    elo0: Option<f64>,
-    elo1: Option<f64>,
-    alpha: Option<f64>,
-    beta: Option<f64>,
-    rallies_per_match: Option<u32>,
-    max_matches: Option<u32>,
-    seed: Option<u64>,
-}
-
-fn default_rallies() -> u32 {
-    20
-}
-fn default_seed() -> u64 {
-    1
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PlanMatch {
-    a: AgentRef,
-    b: AgentRef,
-    rallies: Option<u32>,
-    seed: Option<u64>,
-    #[serde(default = "one")]
-    repeat: u32,
-}
-
-fn one() -> u32 {
-    1
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PlanTournament {
-    kind: String,
-    agents: Vec<AgentRef>,
-    rallies_per_match: Option<u32>,
-    #[serde(default = "one")]
-    rounds: u32,
-    seed: Option<u64>,
 }
 
 /// The HTTP side: JSON requests with the bearer token, 4xx/5xx turned into the server's message.
@@ -246,133 +178,13 @@ impl Client {
     }
 }
 
-/// What the plan asks for, with agents resolved to ids.
-enum Job {
-    Match {
-        a: i64,
-        b: i64,
-        rallies: u32,
-        seed: u64,
-    },
-    Tournament {
-        body: Value,
-        label: String,
-    },
-    Sprt {
-        body: Value,
-        label: String,
-    },
-}
-
-/// Turns the plan into requests, resolving agent names against the server's agents; a usage error
-/// for anything wrong, before anything is submitted.
-fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<Vec<Job>, String> {
-    let resolve = |r: &AgentRef, at: &str| -> Result<i64, String> {
-        match r {
-            AgentRef::Id(id) if ids.contains(id) => Ok(*id),
-            AgentRef::Id(id) => Err(format!("{at}: the server has no agent with id {id}")),
-            AgentRef::Name(n) => agents.get(n).copied().ok_or_else(|| {
-                let mut known: Vec<&str> = agents.keys().map(String::as_str).collect();
-                known.sort();
-                format!(
-                    "{at}: the server has no agent named '{n}' (it has: {})",
-                    known.join(", ")
-                )
-            }),
-        }
-    };
-    let mut out = Vec::new();
-    let mut k = 0u64;
-    for (i, m) in plan.matches.iter().enumerate() {
-        let at = format!("match {}", i + 1);
-        let (a, b) = (resolve(&m.a, &at)?, resolve(&m.b, &at)?);
-        let rallies = m.rallies.unwrap_or(plan.rallies);
-        if rallies == 0 {
-            return Err(format!("{at}: rallies must be at least 1"));
-        }
-        if m.repeat == 0 || m.repeat > 10_000 {
-            return Err(format!("{at}: repeat must be between 1 and 10000"));
-        }
-        let seed = m.seed.unwrap_or(plan.seed.wrapping_add(k));
-        for r in 0..m.repeat {
-            let (x, y) = if r % 2 == 0 { (a, b) } else { (b, a) };
-            out.push(Job::Match {
-                a: x,
-                b: y,
-                rallies,
-                seed: seed.wrapping_add(r as u64) & (i64::MAX as u64),
-            });
-        }
-        k += 1;
-    }
-    for (i, t) in plan.tournaments.iter().enumerate() {
-        let at = format!("tournament {}", i + 1);
-        if t.kind != "round_robin" && t.kind != "gauntlet" {
-            return Err(format!(
-                "{at}: kind must be round_robin or gauntlet, not '{}'",
-                t.kind
-            ));
-        }
-        let agents: Vec<i64> = t
-            .agents
-            .iter()
-            .map(|r| resolve(r, &at))
-            .collect::<Result<_, _>>()?;
-        let seed = t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64);
-        out.push(Job::Tournament {
-            body: json!({"kind": t.kind, "agents": agents, "rallies_per_match": t.rallies_per_match.unwrap_or(plan.rallies),
-                         "rounds": t.rounds, "seed": seed}),
-            label: format!("{}, {} agents", t.kind, agents.len()),
-        });
-        k += 1;
-    }
-    for (i, t) in plan.sprts.iter().enumerate() {
-        let at = format!("sprt {}", i + 1);
-        let (a, b) = (resolve(&t.a, &at)?, resolve(&t.b, &at)?);
-        if a == b {
-            return Err(format!("{at}: an SPRT needs two different agents"));
-        }
-        let mut body = json!({"a": a, "b": b,
-            "seed": t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64),
-            "rallies_per_match": t.rallies_per_match.unwrap_or(plan.rallies)});
-        for (key, v) in [
-            ("elo0", t.elo0),
-            ("elo1", t.elo1),
-            ("alpha", t.alpha),
-            ("beta", t.beta),
-        ] {
-            if let Some(v) = v {
-                body[key] = json!(v);
-            }
-        }
-        if let Some(m) = t.max_matches {
-            body["max_matches"] = json!(m);
-        }
-        let name = |id: i64| {
-            agents
-                .iter()
-                .find(|(_, v)| **v == id)
-                .map_or(format!("#{id}"), |(n, _)| n.clone())
-        };
-        out.push(Job::Sprt {
-            body,
-            label: format!("{} vs {}", name(a), name(b)),
-        });
-        k += 1;
-    }
-    if out.is_empty() {
-        return Err("the plan has no [[match]], [[tournament]] or [[sprt]] entry".into());
-    }
-    Ok(out)
-}
-
 /// Runs `rally batch`.
 pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     let text = std::fs::read_to_string(&args.plan).map_err(|e| {
         CliError::Usage(format!("cannot read the plan {}: {e}", args.plan.display()))
     })?;
-    let plan: Plan = toml::from_str(&text)
-        .map_err(|e| CliError::Usage(format!("{}: {e}", args.plan.display())))?;
+    let plan =
+        plan::parse(&text).map_err(|e| CliError::Usage(format!("{}: {e}", args.plan.display())))?;
     let token = args.token.clone().ok_or_else(|| {
         CliError::Usage(
             "no token: pass --token or set RALLY_TOKEN (a submitter or admin token)".into(),
@@ -822,67 +634,5 @@ fn print_standings(id: i64, label: &str, v: &Value) {
             .and_then(|s| s["place"].as_u64())
             .map_or("?".into(), |p| p.to_string());
         println!("   {place:>5}");
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn plan(text: &str) -> Plan {
-        toml::from_str(text).expect("a valid plan")
-    }
-
-    #[test]
-    fn repeats_swap_sides_and_count_seeds() {
-        let p = plan(
-            "rallies = 5\nseed = 10\n[[match]]\na = \"x\"\nb = 2\nrepeat = 3\n[[match]]\na = 2\nb = \"x\"\nseed = 99\n[[tournament]]\nkind = \"gauntlet\"\nagents = [\"x\", 2]\n",
-        );
-        let names: HashMap<String, i64> = [("x".to_string(), 1)].into();
-        let jobs = jobs(&p, &names, &[1, 2]).unwrap();
-        let m: Vec<(i64, i64, u32, u64)> = jobs
-            .iter()
-            .filter_map(|j| match j {
-                Job::Match {
-                    a,
-                    b,
-                    rallies,
-                    seed,
-                } => Some((*a, *b, *rallies, *seed)),
-                _ => None,
-            })
-            .collect();
-        assert_eq!(
-            m,
-            vec![(1, 2, 5, 10), (2, 1, 5, 11), (1, 2, 5, 12), (2, 1, 5, 99)]
-        );
-        let Job::Tournament { body, .. } = &jobs[4] else {
-            panic!("a tournament last")
-        };
-        assert_eq!(body["agents"], json!([1, 2]));
-        assert_eq!(body["seed"], 12, "the third entry: seed + 2");
-        assert_eq!(body["rallies_per_match"], 5);
-    }
-
-    #[test]
-    fn bad_plans_are_refused_before_anything_is_sent() {
-        let names: HashMap<String, i64> = [("x".to_string(), 1)].into();
-        let unknown = plan("[[match]]\na = \"x\"\nb = \"nobody\"\n");
-        let e = jobs(&unknown, &names, &[1]).err().unwrap();
-        assert!(
-            e.contains("no agent named 'nobody'") && e.contains("it has: x"),
-            "{e}"
-        );
-        assert!(jobs(&plan("[[match]]\na = 1\nb = 7\n"), &names, &[1]).is_err());
-        assert!(
-            jobs(&plan("rallies = 3\n"), &names, &[1]).is_err(),
-            "empty plan"
-        );
-        let kind = plan("[[tournament]]\nkind = \"swiss\"\nagents = [1, 1]\n");
-        assert!(jobs(&kind, &names, &[1]).err().unwrap().contains("swiss"));
-        assert!(
-            toml::from_str::<Plan>("[[match]]\na = 1\nb = 2\nrally = 3\n").is_err(),
-            "unknown key"
-        );
     }
 }
