@@ -1,0 +1,28 @@
+//! The checkpoint reader on any text (what `POST /api/v1/agents` and `rally eval FILE` read): a
+//! checkpoint or an error naming the field, never a panic, a hang or unbounded memory. A checkpoint
+//! that loads must also build its network and act once.
+#![no_main]
+
+use std::sync::{Arc, OnceLock};
+
+use agents::checkpoint::Checkpoint;
+use libfuzzer_sys::fuzz_target;
+
+fn model() -> &'static Arc<sim::model::Model> {
+    static MODEL: OnceLock<Arc<sim::model::Model>> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+    })
+}
+
+fuzz_target!(|data: &[u8]| {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(c) = Checkpoint::from_json(text, model()) {
+        let net = c
+            .network()
+            .expect("a checkpoint that loads builds its network");
+        let _ = net.forward(&vec![0.0; c.observation.mean.len()]);
+    }
+});

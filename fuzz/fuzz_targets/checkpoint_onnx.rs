@@ -1,0 +1,51 @@
+//! The ONNX side of the checkpoint reader: any bytes as the embedded `.onnx` file of an otherwise
+//! valid checkpoint (every observation block, a K-MAC controller). A model or an error naming
+//! `onnx`, never a panic, a hang or unbounded memory. The corpus starts from the ONNX test fixture.
+#![no_main]
+
+use std::sync::{Arc, OnceLock};
+
+use agents::checkpoint::{Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
+use agents::controller::{ControllerSpec, PdGains};
+use agents::observation::{ObsBlock, Observer};
+use base64::Engine;
+use libfuzzer_sys::fuzz_target;
+
+fn model() -> &'static Arc<sim::model::Model> {
+    static MODEL: OnceLock<Arc<sim::model::Model>> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+    })
+}
+
+fuzz_target!(|data: &[u8]| {
+    let m = model();
+    let n = Observer::new(m, ObsBlock::ALL.to_vec(), 0).size();
+    let c = Checkpoint {
+        format: FORMAT.into(),
+        version: VERSION,
+        name: "fuzz".into(),
+        controller: ControllerSpec::Kmac {
+            gains: PdGains { kp: 10.0, kd: 1.0 },
+        },
+        observation: ObservationSpec {
+            blocks: ObsBlock::ALL.to_vec(),
+            mean: vec![0.0; n],
+            std: vec![1.0; n],
+        },
+        policy: None,
+        onnx: Some(OnnxPolicy {
+            model_base64: base64::engine::general_purpose::STANDARD.encode(data),
+        }),
+        policy_std: None,
+        grip_floor: None,
+        training: None,
+    };
+    let text = serde_json::to_string(&c).unwrap();
+    if let Ok(c) = Checkpoint::from_json(&text, m) {
+        let net = c
+            .network()
+            .expect("a checkpoint that loads builds its network");
+        let _ = net.forward(&vec![0.0; n]);
+    }
+});
