@@ -308,12 +308,21 @@ async fn live_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiRes
     let m = db::match_row(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("match", id))?;
-    let rx = s
-        .live
-        .lock()
-        .map_err(|_| anyhow::anyhow!("live registry poisoned"))?
-        .get(&id)
-        .map(|tx| tx.subscribe());
+    let lookup = || -> ApiResult<_> {
+        Ok(s.live
+            .lock()
+            .map_err(|_| anyhow::anyhow!("live registry poisoned"))?
+            .get(&id)
+            .map(|tx| tx.subscribe()))
+    };
+    let mut rx = lookup()?;
+    // Claimed a moment ago: its worker registers the feed as it starts; give it a second.
+    let mut tries = 0;
+    while rx.is_none() && m.status == "running" && tries < 20 {
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        rx = lookup()?;
+        tries += 1;
+    }
     let Some(rx) = rx else {
         return Err(ApiError::new(
             StatusCode::CONFLICT,

@@ -134,6 +134,22 @@ fn specs_unchanged(m: &db::Match, spec_a: &str, spec_b: &str) -> bool {
 }
 
 async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
+    // The live channel first: the match is `running` from its claim on, so a viewer may ask for
+    // its feed before the agents' specs are read (seen in CI: 409 while the specs were fetched).
+    let id = m.id;
+    if let Ok(mut live) = state.live.lock() {
+        live.insert(id, tokio::sync::broadcast::channel(crate::LIVE_BUFFER).0);
+    }
+    // Dropping the channel when this function returns ends every live viewer's stream.
+    struct Unregister(AppState, i64);
+    impl Drop for Unregister {
+        fn drop(&mut self) {
+            if let Ok(mut live) = self.0.live.lock() {
+                live.remove(&self.1);
+            }
+        }
+    }
+    let _unregister = Unregister(state.clone(), id);
     let spec_of = |id: i64| {
         let state = state.clone();
         async move {
@@ -154,21 +170,7 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
         return Ok(());
     }
     let st = state.clone();
-    let id = m.id;
     let started = std::time::Instant::now();
-    if let Ok(mut live) = state.live.lock() {
-        live.insert(id, tokio::sync::broadcast::channel(crate::LIVE_BUFFER).0);
-    }
-    // Dropping the channel when this function returns ends every live viewer's stream.
-    struct Unregister(AppState, i64);
-    impl Drop for Unregister {
-        fn drop(&mut self) {
-            if let Ok(mut live) = self.0.live.lock() {
-                live.remove(&self.1);
-            }
-        }
-    }
-    let _unregister = Unregister(state.clone(), id);
     let result = tokio::task::spawn_blocking(move || {
         let a = player_spec(&st, &ka, &sa)?;
         let b = player_spec(&st, &kb, &sb)?;
