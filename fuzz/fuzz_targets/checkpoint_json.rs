@@ -3,17 +3,9 @@
 //! that loads must also build its network and act once.
 #![no_main]
 
-use std::sync::{Arc, OnceLock};
-
 use agents::checkpoint::Checkpoint;
 use libfuzzer_sys::fuzz_target;
-
-fn model() -> &'static Arc<sim::model::Model> {
-    static MODEL: OnceLock<Arc<sim::model::Model>> = OnceLock::new();
-    MODEL.get_or_init(|| {
-        Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
-    })
-}
+use muscle_rally_fuzz::model;
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

@@ -3,20 +3,12 @@
 //! `onnx`, never a panic, a hang or unbounded memory. The corpus starts from the ONNX test fixture.
 #![no_main]
 
-use std::sync::{Arc, OnceLock};
-
 use agents::checkpoint::{Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
 use agents::controller::{ControllerSpec, PdGains};
 use agents::observation::{ObsBlock, Observer};
 use base64::Engine;
 use libfuzzer_sys::fuzz_target;
-
-fn model() -> &'static Arc<sim::model::Model> {
-    static MODEL: OnceLock<Arc<sim::model::Model>> = OnceLock::new();
-    MODEL.get_or_init(|| {
-        Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
-    })
-}
+use muscle_rally_fuzz::model;
 
 fuzz_target!(|data: &[u8]| {
     let m = model();
