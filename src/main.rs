@@ -43,6 +43,8 @@ enum Command {
     Serve(cmd::serve::ServeArgs),
     /// Train a policy with PPO (Diff-Muscle or a baseline), resumable, with learning curves.
     Train(cmd::train::TrainArgs),
+    /// Play queued matches from the server's database, without the HTTP server (scale-out).
+    Worker(cmd::worker::WorkerArgs),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +62,7 @@ fn main() -> ExitCode {
         Command::Train(args) => cmd::train::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),
         Command::Reproduce(args) => cmd::reproduce::run(&args),
+        Command::Worker(args) => cmd::worker::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

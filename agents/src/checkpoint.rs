@@ -609,6 +609,11 @@ impl CheckpointPlayer {
             noise: noise_stream(seed),
         })
     }
+
+    /// The planner's current command (the plan and its absolute strike time), if a ball is coming.
+    pub fn command(&self) -> Option<&(crate::planner::Plan, f64)> {
+        self.observer.command()
+    }
 }
 
 impl Player for CheckpointPlayer {

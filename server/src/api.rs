@@ -182,6 +182,7 @@ pub fn router(state: AppState) -> Router {
         .route("/arena", get(arena))
         .route("/model", get(robot_model))
         .route("/tokens", axum::routing::post(issue_token))
+        .route("/workers", get(list_workers))
         .route("/metrics", get(metrics))
         .route("/openapi.json", get(openapi))
         .fallback(|| async {
@@ -205,6 +206,35 @@ async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {
     sqlx::query("SELECT 1").execute(&s.pool).await?;
     Ok(Json(
         json!({"status": "ok", "sim_version": sim::SIM_VERSION}),
+    ))
+}
+
+/// `GET /workers`: every process that plays or played matches (this server's own pool and
+/// `rally worker`s), with its heartbeat's age, whether its lease would still hold, and the matches
+/// it holds now.
+async fn list_workers(State(s): State<AppState>) -> ApiResult<Json<Value>> {
+    let now = db::workers::now_ms();
+    let lease = s.settings.lease_ms();
+    let running = db::workers::running(&s.pool).await?;
+    let workers: Vec<Value> = db::workers::workers(&s.pool)
+        .await?
+        .into_iter()
+        .map(|w| {
+            let holding: Vec<i64> = running
+                .iter()
+                .filter(|(_, h)| h.as_deref() == Some(w.name.as_str()))
+                .map(|(id, _)| *id)
+                .collect();
+            let age = (now - w.heartbeat_ms).max(0);
+            let mut v = json!(w);
+            v["seconds_since_heartbeat"] = json!(age as f64 / 1000.0);
+            v["alive"] = json!(w.status == "running" && age < lease);
+            v["matches_running"] = json!(holding);
+            v
+        })
+        .collect();
+    Ok(Json(
+        json!({ "workers": workers, "lease_s": s.settings.lease_s }),
     ))
 }
 
@@ -316,6 +346,19 @@ async fn live_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiRes
             .map(|tx| tx.subscribe()))
     };
     let mut rx = lookup()?;
+    if let Some(w) = m
+        .worker
+        .as_deref()
+        .filter(|w| rx.is_none() && m.status == "running" && *w != s.worker.as_str())
+    {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_local",
+            format!(
+                "match {id} is played by worker '{w}' in another process: only matches this server's own workers play can be watched live (its replay once done: /replay?match={id})"
+            ),
+        ));
+    }
     // Claimed a moment ago: its worker registers the feed as it starts; give it a second.
     let mut tries = 0;
     while rx.is_none() && m.status == "running" && tries < 20 {

@@ -72,6 +72,45 @@ pub struct Settings {
     /// submissions; empty: none. A file that does not load is skipped with a warning.
     #[serde(default = "default_builtin_checkpoints")]
     pub builtin_checkpoints: PathBuf,
+    /// How long a running match's lease lasts without a heartbeat, s: a worker that died or lost
+    /// the database loses its matches after this long (they are queued again). Heartbeats come
+    /// every quarter of it.
+    #[serde(default = "default_lease_s")]
+    pub lease_s: f64,
+    /// This process's worker name in the `workers` table and the matches it plays; empty:
+    /// `HOST:PID`.
+    #[serde(default)]
+    pub worker_name: String,
+}
+
+fn default_lease_s() -> f64 {
+    20.0
+}
+
+impl Settings {
+    /// The lease of a claimed match, ms.
+    pub fn lease_ms(&self) -> i64 {
+        (self.lease_s * 1000.0).round() as i64
+    }
+
+    /// This process's worker name (`worker_name`, or `HOST:PID`).
+    pub fn worker(&self) -> String {
+        if self.worker_name.is_empty() {
+            format!("{}:{}", hostname(), std::process::id())
+        } else {
+            self.worker_name.clone()
+        }
+    }
+}
+
+/// This machine's name (Linux: the kernel's; else `HOSTNAME`, else "localhost").
+pub fn hostname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().to_string())
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "localhost".into())
 }
 
 fn default_builtin_checkpoints() -> PathBuf {
@@ -94,8 +133,11 @@ impl Settings {
     /// Parses settings, naming the field that is wrong.
     pub fn from_toml(text: &str) -> Result<Settings, String> {
         let s: Settings = toml::from_str(text).map_err(|e| e.to_string())?;
-        if s.workers == 0 || s.workers > 64 {
-            return Err("workers must be between 1 and 64".into());
+        if s.workers > 64 {
+            return Err("workers must be between 0 (serve the API alone) and 64".into());
+        }
+        if !(s.lease_s.is_finite() && s.lease_s >= 1.0) {
+            return Err("lease_s must be at least 1 second".into());
         }
         if s.max_rallies == 0 || s.continuous_rallies == 0 || s.continuous_rallies > s.max_rallies {
             return Err("max_rallies and continuous_rallies must be positive, continuous_rallies ≤ max_rallies".into());
@@ -155,6 +197,8 @@ pub type CachedBoard = (usize, i64, Arc<ratings::Leaderboard>);
 /// Everything the handlers and workers share.
 #[derive(Clone)]
 pub struct AppState {
+    /// This process's worker name (see [`Settings::worker`]).
+    pub worker: Arc<String>,
     /// The database.
     pub pool: SqlitePool,
     /// The robot model both sides play with.
@@ -193,15 +237,17 @@ pub enum Budget {
 pub type RateLog =
     std::collections::HashMap<(i64, Budget), std::collections::VecDeque<(std::time::Instant, u32)>>;
 
-/// Opens the database, applies the migrations, re-queues matches a previous process left running,
-/// registers the built-in agents, starts the workers and serves until SIGINT/SIGTERM.
+/// Opens the database, applies the migrations, re-queues matches whose lease ran out, registers the
+/// built-in agents, starts the workers (none with `workers = 0`: `rally worker` processes play) and
+/// serves until SIGINT/SIGTERM.
 pub async fn serve(settings: Settings, on_ready: impl FnOnce(SocketAddr)) -> anyhow::Result<()> {
     let state = start(settings).await?;
     let listener = tokio::net::TcpListener::bind(state.settings.addr).await?;
     let addr = listener.local_addr()?;
     on_ready(addr);
     let shutdown = Arc::new(Notify::new());
-    let workers = scheduler::spawn_workers(state.clone(), shutdown.clone());
+    let workers = scheduler::Workers::start(state.clone(), shutdown.clone()).await?;
+    let background = scheduler::spawn_background(state.clone(), shutdown.clone());
     let app = api::router(state.clone());
     axum::serve(listener, app)
         .with_graceful_shutdown(async move {
@@ -209,29 +255,55 @@ pub async fn serve(settings: Settings, on_ready: impl FnOnce(SocketAddr)) -> any
             shutdown.notify_waiters();
         })
         .await?;
-    for w in workers {
-        let _ = w.await;
+    workers.join(&state).await;
+    for b in background {
+        b.abort();
     }
+    state.pool.close().await;
+    Ok(())
+}
+
+/// `rally worker`: plays queued matches from the database until SIGINT/SIGTERM (the matches it is
+/// playing are finished and stored first), with no HTTP server. `on_ready` gets the worker's name.
+pub async fn work(settings: Settings, on_ready: impl FnOnce(&str)) -> anyhow::Result<()> {
+    let state = open_state(settings).await?;
+    let shutdown = Arc::new(Notify::new());
+    let workers = scheduler::Workers::start(state.clone(), shutdown.clone()).await?;
+    on_ready(&state.worker);
+    shutdown_signal().await;
+    shutdown.notify_waiters();
+    workers.join(&state).await;
     state.pool.close().await;
     Ok(())
 }
 
 /// The state of a server: database ready, built-in agents registered.
 pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
+    let state = open_state(settings).await?;
+    db::register_builtins(&state.pool).await?;
+    register_builtin_checkpoints(&state).await?;
+    Ok(state)
+}
+
+/// The state a process that plays matches needs (`rally serve`, `rally worker`): the database
+/// open and migrated, the model loaded, matches whose lease ran out queued again.
+pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
     let pool = db::open(&settings.db).await?;
-    let requeued = db::requeue_running(&pool).await?;
+    let requeued = db::workers::requeue_expired(&pool, db::workers::now_ms()).await?;
     if requeued > 0 {
         tracing::info!(
             requeued,
-            "re-queued matches left running by a previous process"
+            "re-queued running matches whose worker's lease ran out"
         );
     }
     let model = Arc::new(sim::mjcf::parse_str(
         sim::config::DEFAULT_MODEL_XML,
         "config/models/upper_body.xml",
     )?);
-    let workers = settings.workers;
-    let state = AppState {
+    let workers = settings.workers.max(1);
+    let worker = Arc::new(settings.worker());
+    Ok(AppState {
+        worker,
         pool,
         model,
         arena: sim::config::ArenaConfig::default(),
@@ -243,10 +315,7 @@ pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
         events: tokio::sync::broadcast::channel(EVENT_BUFFER).0,
         live: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),
-    };
-    db::register_builtins(&state.pool).await?;
-    register_builtin_checkpoints(&state).await?;
-    Ok(state)
+    })
 }
 
 /// Qualifies an agent on `qualification_episodes` P2 serves (seed 0), one qualification at a time

@@ -1,22 +1,32 @@
-//! The scheduler: `settings.workers` async tasks, each claiming the oldest queued match
-//! (queued → running, one transaction), playing it on a blocking thread with `agents`' match runner,
-//! and storing rallies, crossings, replay and summary with the `done` mark in one transaction (or
-//! marking it `failed`). A match cancelled while running is played out and its result discarded.
-//! A match left `running` by a killed process is re-queued at the next start (`db::requeue_running`):
-//! since results are written only with the `done` mark, none is lost and none counted twice.
+//! The scheduler. A process that plays matches — `rally serve` with `workers > 0`, or a
+//! `rally worker` — registers itself in the `workers` table under its name and runs
+//! `settings.workers` async tasks. Each is fishtest's worker loop: **ask** (claim the oldest queued
+//! match: queued → running with a lease, one statement), **play** (on a blocking thread, with
+//! `agents`' match runner), **report** (rallies, crossings, replay, summary, ratings and the SPRT's
+//! step with the `done` mark in one transaction, under the lease), **repeat**. With nothing queued
+//! a task waits to be woken (a match queued by this process) or one second (one queued by another).
 //!
-//! Continuous mode: when the queue is empty a worker queues a match for the agent whose rating
-//! interval is widest (no interval counts as widest), against the opponent it has met least, at most
-//! one every `continuous_pause_s` seconds. Continuous-mode matches store no replay frames (about
-//! 50 kB a rally even gzipped); `GET /matches/{id}/replay` re-simulates such a rally on request,
-//! bit-identical to the one played (rallies are independent: `agents::matchrun::replay_rally`).
+//! Leases (`db::workers`): the process's heartbeat renews the leases of every match it plays each
+//! quarter of `lease_s`. A worker killed with -9, or cut off from the database, stops renewing; once
+//! its leases run out, the next claim (by any worker) queues its matches again, and a result it
+//! reports after that is refused. Results are written only with the `done` mark, under the current
+//! claim, so no match is lost and none is stored twice. SIGTERM finishes the matches being played,
+//! stores them and marks the worker stopped. A match cancelled while running is played out and its
+//! result discarded.
+//!
+//! Continuous mode (`rally serve` only, [`spawn_background`]): when the queue is empty the server
+//! queues a match for the agent whose rating interval is widest (no interval counts as widest),
+//! against the opponent it has met least, at most one every `continuous_pause_s` seconds; any
+//! worker may play it. Continuous-mode matches store no replay frames (about 50 kB a rally even
+//! gzipped); `GET /matches/{id}/replay` re-simulates such a rally on request, bit-identical to the
+//! one played (rallies are independent: `agents::matchrun::replay_rally`).
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use agents::factory::PlayerSpec;
 use agents::matchrun::MatchSpec;
-use tokio::sync::{Mutex, Notify};
+use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 
 use crate::{db, AppState};
@@ -133,7 +143,7 @@ fn specs_unchanged(m: &db::Match, spec_a: &str, spec_b: &str) -> bool {
     db::spec_hash(spec_a) == m.spec_hash_a && db::spec_hash(spec_b) == m.spec_hash_b
 }
 
-async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
+async fn run_one(state: &AppState, m: db::Match, lease: db::Lease) -> anyhow::Result<()> {
     // The live channel first: the match is `running` from its claim on, so a viewer may ask for
     // its feed before the agents' specs are read (seen in CI: 409 while the specs were fetched).
     let id = m.id;
@@ -161,12 +171,10 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
     let (ka, sa) = spec_of(m.agent_a).await?;
     let (kb, sb) = spec_of(m.agent_b).await?;
     if !specs_unchanged(&m, &sa, &sb) {
-        db::fail(
-            &state.pool,
-            m.id,
-            "an agent's spec changed since the match was queued",
-        )
-        .await?;
+        let error = "an agent's spec changed since the match was queued";
+        if db::fail(&state.pool, &lease, error).await? == db::Stored::Done {
+            state.publish("match", id, Some("failed"));
+        }
         return Ok(());
     }
     let st = state.clone();
@@ -177,13 +185,14 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
         play(&st, &m, &a, &b)
     })
     .await;
-    match result {
+    let (stored, status) = match result {
         Ok(Ok((record, replay))) => {
-            // A busy database is retried; a match that still cannot be stored stays `running` and
-            // is re-queued at the next start (nothing half-written: it is one transaction).
+            // A busy database is retried; a match that still cannot be stored keeps its lease
+            // until the heartbeat stops (this process exits), then is queued again (nothing
+            // half-written: it is one transaction).
             let mut attempt = 0;
             let stored = loop {
-                match db::store_result(&state.pool, id, &record, &replay).await {
+                match db::store_result(&state.pool, &lease, &record, &replay).await {
                     Ok(stored) => break stored,
                     Err(e) if attempt < 5 => {
                         attempt += 1;
@@ -193,29 +202,34 @@ async fn run_one(state: &AppState, m: db::Match) -> anyhow::Result<()> {
                     Err(e) => return Err(e.into()),
                 }
             };
-            if stored {
-                state.publish("match", id, Some("done"));
-            }
             tracing::info!(
                 id,
                 points_a = record.points[0],
                 points_b = record.points[1],
                 seconds = started.elapsed().as_secs_f64(),
-                stored,
+                ?stored,
                 "match finished"
             );
+            (stored, "done")
         }
         Ok(Err(e)) => {
             tracing::warn!(id, error = %e, "match failed");
-            db::fail(&state.pool, id, &e).await?;
-            state.publish("match", id, Some("failed"));
+            (db::fail(&state.pool, &lease, &e).await?, "failed")
         }
         Err(join) => {
             let e = format!("match worker panicked: {join}");
             tracing::error!(id, error = %e);
-            db::fail(&state.pool, id, &e).await?;
-            state.publish("match", id, Some("failed"));
+            (db::fail(&state.pool, &lease, &e).await?, "failed")
         }
+    };
+    match stored {
+        db::Stored::Done => state.publish("match", id, Some(status)),
+        db::Stored::Cancelled => {}
+        db::Stored::LeaseLost => tracing::warn!(
+            id,
+            worker = %lease.worker,
+            "the lease of the match was lost (queued again for another worker): result refused"
+        ),
     }
     Ok(())
 }
@@ -251,15 +265,26 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
             .and_then(|r| Some(r.rating_high? - r.rating_low?))
             .unwrap_or(f64::INFINITY)
     };
+    // Matches being played count as met, and their agents are picked last: the leaderboard does
+    // not know their results yet.
+    let pending: Vec<(i64, i64)> =
+        sqlx::query_as("SELECT agent_a, agent_b FROM matches WHERE status = 'running'")
+            .fetch_all(&state.pool)
+            .await?;
     let met = |x: i64, y: i64| {
-        outcomes
-            .iter()
-            .filter(|o| (o.0 == x && o.1 == y) || (o.0 == y && o.1 == x))
-            .count()
+        let pair = |a: i64, b: i64| (a == x && b == y) || (a == y && b == x);
+        outcomes.iter().filter(|o| pair(o.0, o.1)).count()
+            + pending.iter().filter(|p| pair(p.0, p.1)).count()
     };
+    let busy = |id: i64| pending.iter().any(|p| p.0 == id || p.1 == id);
     let first = agents
         .iter()
-        .max_by(|p, q| width(p.id).total_cmp(&width(q.id)).then(q.id.cmp(&p.id)))
+        .max_by(|p, q| {
+            busy(q.id)
+                .cmp(&busy(p.id))
+                .then(width(p.id).total_cmp(&width(q.id)))
+                .then(q.id.cmp(&p.id))
+        })
         .expect("two agents");
     let second = agents
         .iter()
@@ -277,7 +302,11 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     } else {
         (second, first)
     };
-    let seed = outcomes.len() as u64 + 1;
+    // Distinct seeds for distinct matches (the next id; results not yet known do not repeat it).
+    let (last_id,): (i64,) = sqlx::query_as("SELECT COALESCE(MAX(id), 0) FROM matches")
+        .fetch_one(&state.pool)
+        .await?;
+    let seed = last_id as u64 + 1;
     let id = db::queue_match(
         &state.pool,
         a,
@@ -292,65 +321,168 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     Ok(true)
 }
 
-/// Starts the workers; they stop after `shutdown` is notified (a running match is finished first).
-pub fn spawn_workers(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandle<()>> {
-    // When continuous mode last queued a match (it waits `continuous_pause_s` between them).
-    let queue_lock: Arc<Mutex<Option<std::time::Instant>>> = Arc::new(Mutex::new(None));
-    let stopping = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    {
-        let (shutdown, stopping, wake) = (shutdown.clone(), stopping.clone(), state.wake.clone());
-        tokio::spawn(async move {
-            shutdown.notified().await;
-            stopping.store(true, std::sync::atomic::Ordering::SeqCst);
-            wake.notify_waiters();
-        });
-    }
-    (0..state.settings.workers)
-        .map(|w| {
-            let (state, queue_lock, stopping) =
-                (state.clone(), queue_lock.clone(), stopping.clone());
+/// This process's match workers: `settings.workers` tasks and the heartbeat that renews their leases.
+pub struct Workers {
+    tasks: Vec<JoinHandle<()>>,
+    heartbeat: Option<JoinHandle<()>>,
+}
+
+impl Workers {
+    /// Registers this process as worker `state.worker` (refused if a live process holds the name)
+    /// and starts its tasks; they stop after `shutdown` is notified, each finishing the match it
+    /// plays. With `settings.workers = 0` nothing is registered or started.
+    pub async fn start(state: AppState, shutdown: Arc<Notify>) -> anyhow::Result<Workers> {
+        let n = state.settings.workers;
+        if n == 0 {
+            return Ok(Workers {
+                tasks: Vec::new(),
+                heartbeat: None,
+            });
+        }
+        let lease_ms = state.settings.lease_ms();
+        let host = crate::hostname();
+        db::workers::register(
+            &state.pool,
+            &state.worker,
+            &host,
+            std::process::id(),
+            n,
+            lease_ms,
+        )
+        .await?;
+        let stopping = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        {
+            let (shutdown, stopping, wake) =
+                (shutdown.clone(), stopping.clone(), state.wake.clone());
             tokio::spawn(async move {
-                while !stopping.load(std::sync::atomic::Ordering::SeqCst) {
-                    let claimed = db::claim(&state.pool).await;
-                    match claimed {
-                        Ok(Some(m)) => {
-                            state.publish("match", m.id, Some("running"));
-                            if let Err(e) = run_one(&state, m).await {
-                                tracing::error!(worker = w, error = %e, "storing a match failed");
-                            }
-                            continue;
-                        }
-                        Ok(None) => {}
-                        Err(e) => {
-                            tracing::error!(worker = w, error = %e, "claiming a match failed")
-                        }
+                shutdown.notified().await;
+                stopping.store(true, std::sync::atomic::Ordering::SeqCst);
+                wake.notify_waiters();
+            });
+        }
+        let heartbeat = {
+            let state = state.clone();
+            tokio::spawn(async move {
+                let every = Duration::from_millis((lease_ms / 4).max(100) as u64);
+                loop {
+                    tokio::time::sleep(every).await;
+                    if let Err(e) =
+                        db::workers::heartbeat(&state.pool, &state.worker, lease_ms).await
+                    {
+                        tracing::warn!(worker = %state.worker, error = %e, "heartbeat failed");
                     }
-                    if state.settings.continuous {
-                        let mut last = queue_lock.lock().await;
-                        let pause = Duration::from_secs_f64(state.settings.continuous_pause_s);
-                        let due = last.is_none_or(|t| t.elapsed() >= pause);
-                        match if due {
-                            queue_continuous(&state).await
-                        } else {
-                            Ok(false)
-                        } {
-                            Ok(true) => {
-                                *last = Some(std::time::Instant::now());
-                                continue;
-                            }
-                            Ok(false) => {}
-                            Err(e) => {
-                                tracing::error!(worker = w, error = %e, "continuous mode failed")
-                            }
-                        }
-                    }
-                    let notified = state.wake.notified();
-                    if stopping.load(std::sync::atomic::Ordering::SeqCst) {
-                        break;
-                    }
-                    let _ = tokio::time::timeout(Duration::from_secs(1), notified).await;
                 }
             })
+        };
+        let tasks = (0..n)
+            .map(|w| {
+                let (state, stopping) = (state.clone(), stopping.clone());
+                tokio::spawn(async move {
+                    while !stopping.load(std::sync::atomic::Ordering::SeqCst) {
+                        let notified = state.wake.notified();
+                        match db::workers::claim(&state.pool, &state.worker, lease_ms).await {
+                            Ok(Some((m, lease))) => {
+                                state.publish("match", m.id, Some("running"));
+                                if let Err(e) = run_one(&state, m, lease).await {
+                                    tracing::error!(worker = w, error = %e, "storing a match failed");
+                                }
+                                continue;
+                            }
+                            Ok(None) => {}
+                            Err(e) => {
+                                tracing::error!(worker = w, error = %e, "claiming a match failed")
+                            }
+                        }
+                        if stopping.load(std::sync::atomic::Ordering::SeqCst) {
+                            break;
+                        }
+                        let _ = tokio::time::timeout(Duration::from_secs(1), notified).await;
+                    }
+                })
+            })
+            .collect();
+        Ok(Workers {
+            tasks,
+            heartbeat: Some(heartbeat),
         })
-        .collect()
+    }
+
+    /// Waits for the tasks to finish their matches, stops the heartbeat and marks the worker stopped.
+    pub async fn join(self, state: &AppState) {
+        if self.tasks.is_empty() {
+            return;
+        }
+        for t in self.tasks {
+            let _ = t.await;
+        }
+        if let Some(h) = self.heartbeat {
+            h.abort();
+        }
+        if let Err(e) = db::workers::stopped(&state.pool, &state.worker).await {
+            tracing::warn!(worker = %state.worker, error = %e, "marking the worker stopped failed");
+        }
+    }
+}
+
+/// The server's own background tasks: continuous mode (if on), and the watcher that turns what
+/// other processes' workers did to the matches (claimed, finished) into this server's events.
+pub fn spawn_background(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandle<()>> {
+    let mut tasks = Vec::new();
+    if state.settings.continuous {
+        let (state, shutdown) = (state.clone(), shutdown.clone());
+        tasks.push(tokio::spawn(async move {
+            let pause = Duration::from_secs_f64(state.settings.continuous_pause_s)
+                .max(Duration::from_millis(100));
+            loop {
+                match queue_continuous(&state).await {
+                    Ok(true) => state.wake.notify_waiters(),
+                    Ok(false) => {}
+                    Err(e) => tracing::error!(error = %e, "continuous mode failed"),
+                }
+                tokio::select! {
+                    _ = tokio::time::sleep(pause) => {}
+                    _ = shutdown.notified() => break,
+                }
+            }
+        }));
+    }
+    tasks.push(tokio::spawn(async move {
+        // Running matches at the last look, and which of them this process plays (it publishes
+        // those itself).
+        let mut last: Vec<(i64, bool)> = Vec::new();
+        loop {
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let Ok(now) = db::workers::running(&state.pool).await else {
+                continue;
+            };
+            let local = |id: i64| {
+                state
+                    .live
+                    .lock()
+                    .map(|l| l.contains_key(&id))
+                    .unwrap_or(false)
+            };
+            for (id, _) in &now {
+                if !last.iter().any(|(l, _)| l == id) && !local(*id) {
+                    state.publish("match", *id, Some("running"));
+                }
+            }
+            for (id, was_local) in &last {
+                if *was_local || now.iter().any(|(n, _)| n == id) {
+                    continue;
+                }
+                if let Ok(Some(m)) = db::match_row(&state.pool, *id).await {
+                    let status = match m.status.as_str() {
+                        "done" => "done",
+                        "failed" => "failed",
+                        "cancelled" => "cancelled",
+                        _ => "queued",
+                    };
+                    state.publish("match", *id, Some(status));
+                }
+            }
+            last = now.iter().map(|(id, _)| (*id, local(*id))).collect();
+        }
+    }));
+    tasks
 }

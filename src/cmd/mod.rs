@@ -13,6 +13,7 @@ pub mod plot;
 pub mod reproduce;
 pub mod serve;
 pub mod train;
+pub mod worker;
 
 use nalgebra::Vector3;
 

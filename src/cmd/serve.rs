@@ -1,7 +1,7 @@
 //! `rally serve`: the tournament server (REST API, scheduler, leaderboard page) on SQLite.
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -28,18 +28,19 @@ pub struct ServeArgs {
     /// SQLite database file (created with its directory if missing).
     #[arg(long, value_name = "FILE")]
     db: Option<PathBuf>,
-    /// Match workers.
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
+    /// Match workers in this process (0: serve the API alone; `rally worker` processes play).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(0..=64))]
     workers: Option<u16>,
     /// Play only requested matches (no continuous matches between the least-rated agents).
     #[arg(long)]
     no_continuous: bool,
 }
 
-/// Runs `rally serve`.
-pub fn run(args: &ServeArgs) -> Result<(), CliError> {
+/// The settings file `config` names (default: config/default.toml, or the built-in copy of it
+/// when that file is missing), errors naming the file and the field.
+pub fn load_settings(config: Option<&Path>) -> Result<server::Settings, CliError> {
     let default_path = PathBuf::from("config/default.toml");
-    let text = match &args.config {
+    let text = match config {
         Some(p) => std::fs::read_to_string(p)
             .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", p.display())))?,
         None if default_path.exists() => {
@@ -47,14 +48,24 @@ pub fn run(args: &ServeArgs) -> Result<(), CliError> {
         }
         None => server::DEFAULT_SETTINGS_TOML.to_string(),
     };
-    let name = args
-        .config
-        .as_deref()
-        .unwrap_or(&default_path)
-        .display()
-        .to_string();
-    let mut settings =
-        server::Settings::from_toml(&text).map_err(|e| CliError::Usage(format!("{name}: {e}")))?;
+    let name = config.unwrap_or(&default_path).display().to_string();
+    server::Settings::from_toml(&text).map_err(|e| CliError::Usage(format!("{name}: {e}")))
+}
+
+/// Logs to stderr (RUST_LOG overrides the default filter).
+pub fn init_logging() {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,sqlx=warn,tower_http=warn".into()),
+        )
+        .init();
+}
+
+/// Runs `rally serve`.
+pub fn run(args: &ServeArgs) -> Result<(), CliError> {
+    let mut settings = load_settings(args.config.as_deref())?;
     if let Some(a) = args.addr {
         settings.addr = a;
     }
@@ -70,13 +81,7 @@ pub fn run(args: &ServeArgs) -> Result<(), CliError> {
     if let Ok(t) = std::env::var("RALLY_ADMIN_TOKEN") {
         settings.admin_token = t;
     }
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info,sqlx=warn,tower_http=warn".into()),
-        )
-        .init();
+    init_logging();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -713,6 +713,11 @@ impl Trainer {
                 let mut grads = total.backward().map_err(e)?;
                 clip_grad_norm(&mut grads, &vars, p.max_grad_norm).map_err(e)?;
                 self.adam.step(&grads).map_err(e)?;
+                if let Some(cap) = p.std_cap(self.progress.env_steps) {
+                    let ls = &self.net.log_std;
+                    let capped = ls.as_tensor().clamp(f32::MIN, cap.ln() as f32).map_err(e)?;
+                    ls.set(&capped).map_err(e)?;
+                }
                 let f = |t: &Tensor| t.to_scalar::<f32>().map(|x| x as f64).map_err(e);
                 sums.kl += kl;
                 sums.surrogate += f(&surrogate)?;

@@ -10,6 +10,9 @@ use sqlx::{FromRow, SqlitePool};
 
 use agents::matchrun::MatchRecord;
 
+pub mod workers;
+pub use workers::Lease;
+
 /// Opens (creating if needed) the database and applies the migrations.
 pub async fn open(path: &Path) -> anyhow::Result<SqlitePool> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -53,17 +56,6 @@ pub async fn register_builtins(pool: &SqlitePool) -> anyhow::Result<()> {
             .await?;
     }
     Ok(())
-}
-
-/// A match a previous process left running goes back to the queue (its partial results were never
-/// written: results are stored in the same transaction that marks it done).
-pub async fn requeue_running(pool: &SqlitePool) -> anyhow::Result<u64> {
-    let r = sqlx::query(
-        "UPDATE matches SET status = 'queued', started_at = NULL WHERE status = 'running'",
-    )
-    .execute(pool)
-    .await?;
-    Ok(r.rows_affected())
 }
 
 /// An agent row.
@@ -209,13 +201,17 @@ pub struct Match {
     pub sprt_id: Option<i64>,
     /// The submitter token that queued it (null: the admin or the server).
     pub created_by: Option<i64>,
+    /// The worker that holds its lease (running) or played it (done, failed).
+    pub worker: Option<String>,
+    /// How many times a worker claimed it (more than once: a worker died or lost its lease).
+    pub attempts: i64,
 }
 
 /// The columns of a [`Match`]; `outdated` compares the stored simulator version with this build's
 /// (a constant of ours, digits and dots only).
 fn match_columns() -> String {
     format!(
-        "id, agent_a, agent_b, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by",
+        "id, agent_a, agent_b, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by, worker, attempts",
         sim::SIM_VERSION
     )
 }
@@ -251,6 +247,8 @@ impl Match {
             tournament_id: None,
             sprt_id: None,
             created_by: None,
+            worker: None,
+            attempts: 0,
         }
     }
 }
@@ -336,32 +334,32 @@ pub async fn matches(
     .await
 }
 
-/// Claims the oldest queued match (queued → running) in one statement, so two workers never take
-/// the same match and no read lock has to be upgraded (which SQLite can refuse under WAL).
-pub async fn claim(pool: &SqlitePool) -> sqlx::Result<Option<Match>> {
-    sqlx::query_as(&format!(
-        "UPDATE matches SET status = 'running', started_at = CURRENT_TIMESTAMP \
-         WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1) AND status = 'queued' \
-         RETURNING {cols}",
-        cols = match_columns()
-    ))
-    .fetch_optional(pool)
-    .await
+/// What became of a result a worker stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stored {
+    /// Written, the match done.
+    Done,
+    /// The match was cancelled meanwhile: it stays cancelled and nothing is written.
+    Cancelled,
+    /// The worker's lease was lost (the match was queued again, and maybe claimed by another
+    /// worker): nothing is written.
+    LeaseLost,
 }
 
-/// Stores a played match — rallies, crossings, replay, summary — and marks it done, in one
-/// transaction; a match cancelled meanwhile stays cancelled and nothing is written.
+/// Stores a played match — rallies, crossings, replay, summary, ratings, SPRT step — and marks it
+/// done, in one transaction, under the worker's current lease (see [`workers`]).
 pub async fn store_result(
     pool: &SqlitePool,
-    id: i64,
+    lease: &Lease,
     r: &MatchRecord,
     replay: &agents::matchrun::Replay,
-) -> sqlx::Result<bool> {
+) -> sqlx::Result<Stored> {
+    let id = lease.match_id;
     // The first statement writes, so the transaction takes the write lock at once (waiting out other
     // writers) instead of upgrading a read lock later.
     let mut tx = pool.begin().await?;
     let marked: Option<(i64, i64, Option<i64>)> = sqlx::query_as(
-        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ? AND status = 'running' RETURNING agent_a, agent_b, sprt_id",
+        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ? AND status = 'running' AND worker = ? AND attempts = ? RETURNING agent_a, agent_b, sprt_id",
     )
     .bind(r.points[0] as i64)
     .bind(r.points[1] as i64)
@@ -372,13 +370,22 @@ pub async fn store_result(
     .bind(r.drift.drift_slope)
     .bind(serde_json::to_string(&r.drift).unwrap_or_default())
     .bind(id)
+    .bind(&lease.worker)
+    .bind(lease.attempt)
     .fetch_optional(&mut *tx)
     .await?;
     let Some((agent_a, agent_b, sprt_id)) = marked else {
-        // Cancelled meanwhile: it stays cancelled and nothing is written.
         tx.rollback().await?;
-        return Ok(false);
+        return lost_or_cancelled(pool, id).await;
     };
+    sqlx::query("UPDATE matches SET lease_expires_ms = NULL WHERE id = ?")
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+    sqlx::query("UPDATE workers SET matches_played = matches_played + 1 WHERE name = ?")
+        .bind(&lease.worker)
+        .execute(&mut *tx)
+        .await?;
     for (side, agent, d) in [
         ("A", agent_a, &r.drift_by_player[0]),
         ("B", agent_b, &r.drift_by_player[1]),
@@ -452,22 +459,41 @@ pub async fn store_result(
         sprt_step(&mut tx, sprt).await?;
     }
     tx.commit().await?;
-    Ok(true)
+    Ok(Stored::Done)
 }
 
-/// Marks a running match failed with a reason; an SPRT it belonged to fails with it (one
-/// transaction).
-pub async fn fail(pool: &SqlitePool, id: i64, error: &str) -> sqlx::Result<()> {
-    let mut tx = pool.begin().await?;
-    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = CURRENT_TIMESTAMP, error = ? WHERE id = ? AND status = 'running' RETURNING sprt_id")
-        .bind(error)
+/// Why a worker's write under its lease matched no row: the match was cancelled, or the lease lost.
+async fn lost_or_cancelled(pool: &SqlitePool, id: i64) -> sqlx::Result<Stored> {
+    let status: Option<(String,)> = sqlx::query_as("SELECT status FROM matches WHERE id = ?")
         .bind(id)
+        .fetch_optional(pool)
+        .await?;
+    Ok(match status {
+        Some((s,)) if s == "cancelled" => Stored::Cancelled,
+        _ => Stored::LeaseLost,
+    })
+}
+
+/// Marks a running match failed with a reason, under the worker's current lease; an SPRT it belonged
+/// to fails with it (one transaction).
+pub async fn fail(pool: &SqlitePool, lease: &Lease, error: &str) -> sqlx::Result<Stored> {
+    let mut tx = pool.begin().await?;
+    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = CURRENT_TIMESTAMP, error = ?, lease_expires_ms = NULL WHERE id = ? AND status = 'running' AND worker = ? AND attempts = ? RETURNING sprt_id")
+        .bind(error)
+        .bind(lease.match_id)
+        .bind(&lease.worker)
+        .bind(lease.attempt)
         .fetch_optional(&mut *tx)
         .await?;
-    if let Some((Some(sprt),)) = sprt {
+    let Some((sprt,)) = sprt else {
+        tx.rollback().await?;
+        return lost_or_cancelled(pool, lease.match_id).await;
+    };
+    if let Some(sprt) = sprt {
         end_sprt(&mut tx, sprt, "failed").await?;
     }
-    tx.commit().await
+    tx.commit().await?;
+    Ok(Stored::Done)
 }
 
 /// Cancels a queued or running match (and the SPRT it belongs to: it cannot go on without it);

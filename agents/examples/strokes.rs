@@ -1,0 +1,94 @@
+//! Where a checkpoint's strokes go wrong: for each single-serve episode, the planned outgoing ball
+//! velocity against the one the paddle produced, and the predicted landing of each. A diagnosis
+//! aid: `cargo run --release --example strokes -- CHECKPOINT [p2|rally] [episodes] [seed]`.
+use agents::checkpoint::{Checkpoint, CheckpointPlayer};
+use agents::player::Player;
+use nalgebra::Vector3;
+use sim::episode::SingleServe;
+use sim::events::ContactKind;
+use sim::predict::{self, BounceModel};
+use sim::rng::Rng;
+use sim::serve::ServeKind;
+use std::sync::Arc;
+
+fn landing(pos: &Vector3<f64>, vel: &Vector3<f64>, m: &BounceModel) -> Option<Vector3<f64>> {
+    predict::next_bounce(pos, vel, m).map(|b| b.pos)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let path = args.first().expect("checkpoint file");
+    let kind = match args.get(1).map(String::as_str).unwrap_or("rally") {
+        "p2" => ServeKind::P2,
+        _ => ServeKind::Rally {
+            server: sim::arena::Side::B,
+        },
+    };
+    let episodes: usize = args.get(2).map(|s| s.parse().unwrap()).unwrap_or(200);
+    let seed: u64 = args.get(3).map(|s| s.parse().unwrap()).unwrap_or(4242);
+    let model = Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap());
+    let ck =
+        Arc::new(Checkpoint::from_json(&std::fs::read_to_string(path).unwrap(), &model).unwrap());
+    let preset = sim::arena::MYOCHALLENGE;
+    let bounce = BounceModel::for_table(&preset.table);
+    let config = sim::config::ArenaConfig::default();
+    let mut env = SingleServe::new(model.clone(), &config, preset).unwrap();
+    let mut player = CheckpointPlayer::new(ck, &model, bounce, 0).unwrap();
+    println!("end,plan_vx,plan_vy,plan_vz,act_vx,act_vy,act_vz,plan_land_x,plan_land_y,act_land_x,act_land_y,pad_err_pos,pad_vx,pad_vy,pad_vz,rkt_vx,rkt_vy,rkt_vz");
+    for i in 0..episodes {
+        let (serve_seed, agent_seed) = agents::seeds::episode_seeds(seed, i);
+        env.reset(kind, &mut Rng::seeded(serve_seed), None);
+        player.reseed(agent_seed);
+        let mut ctrl = vec![0.0; model.actuators.len()];
+        let mut row: Option<String> = None;
+        loop {
+            ctrl.copy_from_slice(&env.robot.state.ctrl);
+            if player
+                .act(&env.robot, &env.world.ball, env.world.time, &mut ctrl)
+                .is_err()
+            {
+                env.invalid_action();
+                break;
+            }
+            let plan = player.command().map(|(p, _)| *p);
+            let pad_v = env.robot.paddle.lin_vel;
+            let pad_p = env.robot.paddle.pose.pos;
+            env.robot.state.ctrl.copy_from_slice(&ctrl);
+            let rep = env.step();
+            let hit = rep
+                .events
+                .iter()
+                .any(|e| matches!(e.kind, ContactKind::Paddle { .. }));
+            if hit && row.is_none() {
+                if let Some(p) = plan {
+                    let f = env.robot.frame;
+                    let v = f.vector_from_world(&env.world.ball.vel);
+                    let x = f.point_from_world(&env.world.ball.pos);
+                    let pl = landing(&p.strike_pos, &p.v_out, &bounce).unwrap_or_default();
+                    let al = landing(&x, &v, &bounce).unwrap_or_default();
+                    let pv = f.vector_from_world(&pad_v);
+                    let pp = f.point_from_world(&pad_p);
+                    row = Some(format!(
+                        "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                        p.v_out.x, p.v_out.y, p.v_out.z, v.x, v.y, v.z, pl.x, pl.y, al.x, al.y,
+                        (pp - p.strike_pos).norm(), pv.x, pv.y, pv.z, p.racket_vel.x, p.racket_vel.y, p.racket_vel.z
+                    ));
+                }
+            }
+            if rep.done {
+                break;
+            }
+        }
+        let end = if env.success {
+            "SUCCESS"
+        } else {
+            env.referee
+                .end()
+                .map(|e| e.reason.name())
+                .unwrap_or("TIME_LIMIT")
+        };
+        if let Some(r) = row {
+            println!("{end},{r}");
+        }
+    }
+}

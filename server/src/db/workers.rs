@@ -1,0 +1,299 @@
+//! Workers and leases (DESIGN §12, migration 0004): who plays which running match, until when.
+//!
+//! A claim takes the oldest queued match and gives it a lease: the claiming worker's name, an expiry
+//! and the claim's number (`attempts`, one more than the last claim's). The worker's heartbeat
+//! renews the leases of every match it holds; a match whose lease ran out is queued again by whoever
+//! claims next. A result (done or failed) is written only under the claim that is current — same
+//! worker, same number, still running — so a worker that lost its lease and finishes anyway is
+//! refused, and no match is ever stored twice. Times are Unix milliseconds from the processes'
+//! clocks: workers on several machines need clocks that agree to well within a lease.
+
+use serde::Serialize;
+use sqlx::{FromRow, SqlitePool};
+
+/// Now, in Unix milliseconds.
+pub fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as i64)
+        .unwrap_or(0)
+}
+
+/// The claim a worker holds on a running match: store its result under it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Lease {
+    /// The match.
+    pub match_id: i64,
+    /// The holder's worker name.
+    pub worker: String,
+    /// The claim's number.
+    pub attempt: i64,
+}
+
+/// A worker as `GET /api/v1/workers` shows it.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct Worker {
+    /// Its name (unique; `HOST:PID` unless given).
+    pub name: String,
+    /// The machine it runs on.
+    pub host: String,
+    /// Its process id there.
+    pub pid: i64,
+    /// Matches it plays at once.
+    pub slots: i64,
+    /// When it started, Unix ms.
+    pub started_ms: i64,
+    /// Its last heartbeat, Unix ms.
+    pub heartbeat_ms: i64,
+    /// Matches it stored.
+    pub matches_played: i64,
+    /// "running" or "stopped" (by itself, after SIGTERM); a worker that died stays "running" with an
+    /// old heartbeat.
+    pub status: String,
+}
+
+/// Queues again every running match whose lease ran out before `now` (its worker died, hung or lost
+/// the database), and any running match without a lease (left by a version before leases). Returns
+/// how many.
+pub async fn requeue_expired(pool: &SqlitePool, now: i64) -> sqlx::Result<u64> {
+    let r = sqlx::query(
+        "UPDATE matches SET status = 'queued', started_at = NULL, worker = NULL, lease_expires_ms = NULL \
+         WHERE status = 'running' AND (lease_expires_ms IS NULL OR lease_expires_ms < ?)",
+    )
+    .bind(now)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected())
+}
+
+/// Queues again every running match held by `worker` (a worker starting under a name gives back what
+/// a previous process of that name held: it holds nothing yet). Returns how many.
+pub async fn requeue_held_by(pool: &SqlitePool, worker: &str) -> sqlx::Result<u64> {
+    let r = sqlx::query(
+        "UPDATE matches SET status = 'queued', started_at = NULL, worker = NULL, lease_expires_ms = NULL \
+         WHERE status = 'running' AND worker = ?",
+    )
+    .bind(worker)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected())
+}
+
+/// Claims the oldest queued match for `worker` with a lease of `lease_ms` (queued → running) in one
+/// statement, so two workers never take the same match; expired leases are queued again first.
+pub async fn claim(
+    pool: &SqlitePool,
+    worker: &str,
+    lease_ms: i64,
+) -> sqlx::Result<Option<(super::Match, Lease)>> {
+    let now = now_ms();
+    requeue_expired(pool, now).await?;
+    let row: Option<(i64, i64)> = sqlx::query_as(
+        "UPDATE matches SET status = 'running', started_at = CURRENT_TIMESTAMP, worker = ?, \
+         lease_expires_ms = ?, attempts = attempts + 1 \
+         WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1) AND status = 'queued' \
+         RETURNING id, attempts",
+    )
+    .bind(worker)
+    .bind(now + lease_ms)
+    .fetch_optional(pool)
+    .await?;
+    let Some((id, attempt)) = row else {
+        return Ok(None);
+    };
+    let m = super::match_row(pool, id)
+        .await?
+        .ok_or(sqlx::Error::RowNotFound)?;
+    Ok(Some((
+        m,
+        Lease {
+            match_id: id,
+            worker: worker.to_string(),
+            attempt,
+        },
+    )))
+}
+
+/// Registers worker `name` as running (a new row, or the row of a previous process of that name),
+/// refusing when a running worker of that name beat less than `lease_ms` ago: two live processes
+/// must not share a name. Gives back what a previous process of the name held.
+pub async fn register(
+    pool: &SqlitePool,
+    name: &str,
+    host: &str,
+    pid: u32,
+    slots: usize,
+    lease_ms: i64,
+) -> anyhow::Result<()> {
+    let now = now_ms();
+    let live: Option<(i64, String, i64)> = sqlx::query_as(
+        "SELECT heartbeat_ms, host, pid FROM workers WHERE name = ? AND status = 'running'",
+    )
+    .bind(name)
+    .fetch_optional(pool)
+    .await?;
+    if let Some((beat, h, p)) = live {
+        let same_process = h == host && p == pid as i64;
+        if now - beat < lease_ms && !same_process {
+            anyhow::bail!(
+                "a worker named '{name}' ({h}, pid {p}) beat {:.1} s ago: give this one another --name, or wait {:.0} s if that process is gone",
+                (now - beat) as f64 / 1000.0,
+                lease_ms as f64 / 1000.0
+            );
+        }
+    }
+    sqlx::query(
+        "INSERT INTO workers (name, host, pid, slots, started_ms, heartbeat_ms, status) VALUES (?, ?, ?, ?, ?, ?, 'running') \
+         ON CONFLICT (name) DO UPDATE SET host = excluded.host, pid = excluded.pid, slots = excluded.slots, \
+         started_ms = excluded.started_ms, heartbeat_ms = excluded.heartbeat_ms, status = 'running'",
+    )
+    .bind(name)
+    .bind(host)
+    .bind(pid as i64)
+    .bind(slots as i64)
+    .bind(now)
+    .bind(now)
+    .execute(pool)
+    .await?;
+    requeue_held_by(pool, name).await?;
+    Ok(())
+}
+
+/// The heartbeat of worker `name`: its row's time, and every lease it holds renewed to `lease_ms`
+/// from now (one transaction). Returns the number of leases renewed.
+pub async fn heartbeat(pool: &SqlitePool, name: &str, lease_ms: i64) -> sqlx::Result<u64> {
+    let now = now_ms();
+    let mut tx = pool.begin().await?;
+    let renewed = sqlx::query(
+        "UPDATE matches SET lease_expires_ms = ? WHERE status = 'running' AND worker = ?",
+    )
+    .bind(now + lease_ms)
+    .bind(name)
+    .execute(&mut *tx)
+    .await?
+    .rows_affected();
+    sqlx::query("UPDATE workers SET heartbeat_ms = ?, status = 'running' WHERE name = ?")
+        .bind(now)
+        .bind(name)
+        .execute(&mut *tx)
+        .await?;
+    tx.commit().await?;
+    Ok(renewed)
+}
+
+/// Marks worker `name` stopped (it finished its matches and exits).
+pub async fn stopped(pool: &SqlitePool, name: &str) -> sqlx::Result<()> {
+    sqlx::query("UPDATE workers SET status = 'stopped', heartbeat_ms = ? WHERE name = ?")
+        .bind(now_ms())
+        .bind(name)
+        .execute(pool)
+        .await?;
+    Ok(())
+}
+
+/// Every worker that ever registered, the most recent heartbeat first.
+pub async fn workers(pool: &SqlitePool) -> sqlx::Result<Vec<Worker>> {
+    sqlx::query_as("SELECT name, host, pid, slots, started_ms, heartbeat_ms, matches_played, status FROM workers ORDER BY heartbeat_ms DESC, name")
+        .fetch_all(pool)
+        .await
+}
+
+/// The running matches (id and lease holder).
+pub async fn running(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<String>)>> {
+    sqlx::query_as("SELECT id, worker FROM matches WHERE status = 'running' ORDER BY id")
+        .fetch_all(pool)
+        .await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::db::{self, Stored};
+
+    #[tokio::test]
+    async fn a_result_reported_after_the_lease_ran_out_is_refused_and_the_new_holder_stores_once() {
+        let path = std::env::temp_dir().join(format!("rally-db-lease-{}.db", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let pool = db::open(&path).await.unwrap();
+        db::register_builtins(&pool).await.unwrap();
+        let all = db::agents(&pool).await.unwrap();
+        let id = db::queue_match(&pool, &all[0], &all[1], 1, 1, false, db::Origin::default())
+            .await
+            .unwrap();
+        register(&pool, "old", "h", 1, 1, 60_000).await.unwrap();
+        register(&pool, "new", "h", 2, 1, 60_000).await.unwrap();
+        // A live name is not taken twice.
+        let taken = register(&pool, "old", "h", 3, 1, 60_000).await.unwrap_err();
+        assert!(
+            taken.to_string().contains("a worker named 'old'"),
+            "{taken}"
+        );
+
+        let (m, stale) = claim(&pool, "old", 60_000).await.unwrap().unwrap();
+        assert_eq!((m.id, stale.attempt, m.status.as_str()), (id, 1, "running"));
+        assert!(
+            claim(&pool, "new", 60_000).await.unwrap().is_none(),
+            "claimed once"
+        );
+        // A heartbeat renews the lease; a lease in the past is queued again at the next claim.
+        assert_eq!(heartbeat(&pool, "old", 60_000).await.unwrap(), 1);
+        assert_eq!(requeue_expired(&pool, now_ms()).await.unwrap(), 0);
+        assert_eq!(requeue_expired(&pool, now_ms() + 120_000).await.unwrap(), 1);
+        let (_, current) = claim(&pool, "new", 60_000).await.unwrap().unwrap();
+        assert_eq!(current.attempt, 2);
+
+        let spec = agents::matchrun::MatchSpec {
+            model: std::sync::Arc::new(
+                sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "m.xml").unwrap(),
+            ),
+            config: sim::config::ArenaConfig::default(),
+            preset: sim::arena::MYOCHALLENGE,
+            rallies: 1,
+            seed: 1,
+            replay: false,
+        };
+        let scripted = agents::factory::PlayerSpec::scripted("scripted").unwrap();
+        let (record, replay) =
+            agents::matchrun::play_match(&spec, &scripted, &scripted, &mut |_| {}).unwrap();
+        // The old holder's result is refused, its failure too; the current holder's is stored once.
+        assert_eq!(
+            db::store_result(&pool, &stale, &record, &replay)
+                .await
+                .unwrap(),
+            Stored::LeaseLost
+        );
+        assert_eq!(
+            db::fail(&pool, &stale, "late").await.unwrap(),
+            Stored::LeaseLost
+        );
+        assert_eq!(
+            db::store_result(&pool, &current, &record, &replay)
+                .await
+                .unwrap(),
+            Stored::Done
+        );
+        assert_eq!(
+            db::store_result(&pool, &current, &record, &replay)
+                .await
+                .unwrap(),
+            Stored::LeaseLost,
+            "a done match is not stored again"
+        );
+        let m = db::match_row(&pool, id).await.unwrap().unwrap();
+        assert_eq!(
+            (m.status.as_str(), m.worker.as_deref(), m.attempts),
+            ("done", Some("new"), 2)
+        );
+        let rallies = db::rallies(&pool, id).await.unwrap();
+        assert_eq!(rallies.len(), 1);
+        let played: Vec<(String, i64)> = workers(&pool)
+            .await
+            .unwrap()
+            .into_iter()
+            .map(|w| (w.name, w.matches_played))
+            .collect();
+        assert!(played.contains(&("new".into(), 1)) && played.contains(&("old".into(), 0)));
+        pool.close().await;
+        let _ = std::fs::remove_file(&path);
+    }
+}

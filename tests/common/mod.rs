@@ -1,0 +1,250 @@
+//! What the server's integration tests share: a `rally serve` child process on a loopback port with
+//! a real SQLite file, raw HTTP/1.1 requests, polling and event streams.
+#![allow(dead_code)] // each test file uses its own part
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+pub const TOKEN: &str = "test-admin-token";
+
+pub struct Server {
+    pub child: Child,
+    pub addr: String,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+pub fn tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("rally-server-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+pub fn start(dir: &Path, continuous: bool) -> Server {
+    start_with(dir, continuous, "")
+}
+
+/// Starts `rally serve` with `extra` lines appended to the test configuration.
+pub fn start_with(dir: &Path, continuous: bool, extra: &str) -> Server {
+    // Continuous mode runs two workers: concurrent claims and stores on one SQLite file.
+    start_serve(dir, if continuous { 2 } else { 1 }, continuous, extra)
+}
+
+/// Writes the test configuration (`workers` match workers in the server, leases of 4 s) to
+/// `dir/server.toml` and returns its path.
+pub fn write_config(dir: &Path, workers: usize, continuous: bool, extra: &str) -> PathBuf {
+    let config = dir.join("server.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "addr = \"127.0.0.1:0\"\ndb = \"{}\"\nworkers = {workers}\ncontinuous = {continuous}\ncontinuous_rallies = 4\n\
+             continuous_pause_s = 0.0\nmax_rallies = 1000\nqualification_episodes = 6\nmax_body_bytes = 65536\nadmin_token = \"\"\n\
+             lease_s = 4.0\n{extra}",
+            dir.join("rally.db").display()
+        ),
+    )
+    .unwrap();
+    config
+}
+
+/// Starts `rally serve` with `workers` match workers of its own (0: the API alone).
+pub fn start_serve(dir: &Path, workers: usize, continuous: bool, extra: &str) -> Server {
+    let config = write_config(dir, workers, continuous, extra);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["serve", "--config"])
+        .arg(&config)
+        .env("RALLY_ADMIN_TOKEN", TOKEN)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("rally serve starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on http://")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string();
+    Server { child, addr }
+}
+
+/// A `rally worker` process named `name` on the database of `dir/server.toml`, once it says it is
+/// ready; killed when dropped.
+pub fn start_worker(dir: &Path, name: &str) -> Server {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["worker", "--config"])
+        .arg(dir.join("server.toml"))
+        .args(["--db"])
+        .arg(dir.join("rally.db"))
+        .args(["--name", name])
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("rally worker starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert_eq!(line.trim(), format!("worker {name} ready"));
+    Server {
+        child,
+        addr: name.to_string(),
+    }
+}
+
+/// One HTTP/1.1 request (Connection: close); returns (status, body).
+pub fn raw(
+    addr: &str,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> (u16, Vec<u8>) {
+    let (status, _, body) = raw_full(addr, method, path, headers, body);
+    (status, body)
+}
+
+/// [`raw`] with the response's header block too.
+pub fn raw_full(
+    addr: &str,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> (u16, String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let mut req = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n",
+        body.len()
+    );
+    for (k, v) in headers {
+        req.push_str(&format!("{k}: {v}\r\n"));
+    }
+    req.push_str("\r\n");
+    s.write_all(req.as_bytes()).unwrap();
+    s.write_all(body).unwrap();
+    let mut resp = Vec::new();
+    let _ = s.read_to_end(&mut resp);
+    let split = resp
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("a header block");
+    let head = String::from_utf8_lossy(&resp[..split]).to_string();
+    let mut body = resp[split + 4..].to_vec();
+    let status: u16 = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        let mut out = Vec::new();
+        let mut rest = &body[..];
+        loop {
+            let nl = rest.windows(2).position(|w| w == b"\r\n").unwrap();
+            let n = usize::from_str_radix(std::str::from_utf8(&rest[..nl]).unwrap().trim(), 16)
+                .unwrap();
+            if n == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[nl + 2..nl + 2 + n]);
+            rest = &rest[nl + 2 + n + 2..];
+        }
+        body = out;
+    }
+    (status, head, body)
+}
+
+pub fn call(
+    addr: &str,
+    method: &str,
+    path: &str,
+    body: Option<&Value>,
+    token: Option<&str>,
+) -> (u16, Value) {
+    let auth = token.map(|t| format!("Bearer {t}"));
+    let mut headers = vec![];
+    if body.is_some() {
+        headers.push(("Content-Type", "application/json"));
+    }
+    if let Some(a) = &auth {
+        headers.push(("Authorization", a.as_str()));
+    }
+    let bytes = body.map(|b| b.to_string().into_bytes()).unwrap_or_default();
+    let (status, body) = raw(addr, method, path, &headers, &bytes);
+    let v = serde_json::from_slice(&body)
+        .unwrap_or_else(|_| Value::String(String::from_utf8_lossy(&body).into()));
+    (status, v)
+}
+
+pub fn wait_for(addr: &str, id: i64, status: &str, limit: Duration) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let (code, m) = call(addr, "GET", &format!("/api/v1/matches/{id}"), None, None);
+        assert_eq!(code, 200, "{m}");
+        if m["status"] == status {
+            return m;
+        }
+        assert!(
+            !["failed", "cancelled"].contains(&m["status"].as_str().unwrap())
+                || m["status"] == status,
+            "{m}"
+        );
+        assert!(
+            t0.elapsed() < limit,
+            "match {id} still {} after {limit:?}",
+            m["status"]
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A DELETE with a bearer token (or none).
+pub fn delete(addr: &str, path: &str, token: Option<&str>) -> (u16, Value) {
+    call(addr, "DELETE", path, None, token)
+}
+
+/// Polls `path` until `done(value)` holds.
+pub fn poll(addr: &str, path: &str, limit: Duration, done: impl Fn(&Value) -> bool) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let (code, v) = call(addr, "GET", path, None, None);
+        assert_eq!(code, 200, "{path}: {v}");
+        if done(&v) {
+            return v;
+        }
+        assert!(t0.elapsed() < limit, "{path} did not get there: {v}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Opens a server-sent event stream (a raw HTTP/1.1 GET); its reader past the header block, which is
+/// returned too (asserted 200).
+pub fn subscribe(addr: &str, path: &str) -> (BufReader<TcpStream>, String) {
+    let mut sub = TcpStream::connect(addr).unwrap();
+    sub.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    write!(
+        sub,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nAccept: text/event-stream\r\n\r\n"
+    )
+    .unwrap();
+    let mut reader = BufReader::new(sub);
+    let mut head = String::new();
+    while reader.read_line(&mut head).unwrap() > 2 && !head.ends_with("\r\n\r\n") {}
+    assert!(head.starts_with("HTTP/1.1 200"), "{path}: {head}");
+    (reader, head)
+}

@@ -1,0 +1,216 @@
+//! Scale-out: `rally serve --workers 0` (the API alone) and `rally worker` processes on one SQLite
+//! file. Workers are killed with -9 and stopped with SIGTERM in the middle of matches: every match is
+//! played and stored exactly once, with the result `rally match` gives for the same seed.
+
+use std::io::BufRead;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use serde_json::{json, Value};
+
+mod common;
+use common::*;
+
+const MATCHES: i64 = 12;
+const RALLIES: i64 = 6;
+
+/// The matches `name` holds the lease of, per `GET /workers`.
+fn holding(addr: &str, name: &str) -> Vec<i64> {
+    let (code, w) = call(addr, "GET", "/api/v1/workers", None, None);
+    assert_eq!(code, 200, "{w}");
+    w["workers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|x| x["name"] == name)
+        .map(|x| {
+            x["matches_running"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|i| i.as_i64().unwrap())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Waits until worker `name` holds a match and returns it.
+fn wait_holding(addr: &str, name: &str) -> i64 {
+    let t0 = Instant::now();
+    loop {
+        if let Some(&id) = holding(addr, name).first() {
+            return id;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "{name} never held a match"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// `rally match` for the same agents and seed: (points, rally lengths).
+fn played_alone(a: &str, b: &str, seed: i64) -> (Value, Vec<i64>) {
+    let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["match", a, b, "--json", "--rallies", &RALLIES.to_string()])
+        .args(["--seed", &seed.to_string()])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let r: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let lengths = r["rallies"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x["length"].as_i64().unwrap())
+        .collect();
+    (r["points"].clone(), lengths)
+}
+
+#[test]
+fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
+    let dir = tempdir("workers-sqlite");
+    let srv = start_serve(&dir, 0, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    let pairs = [
+        ("scripted", "scripted-drive"),
+        ("scripted-soft", "scripted"),
+    ];
+    let mut ids = Vec::new();
+    for k in 0..MATCHES {
+        let (x, y) = pairs[k as usize % 2];
+        let (code, m) = call(
+            a,
+            "POST",
+            "/api/v1/matches",
+            Some(&json!({"a": x, "b": y, "rallies": RALLIES, "seed": 100 + k})),
+            Some(TOKEN),
+        );
+        assert_eq!(code, 202, "{m}");
+        ids.push(m["id"].as_i64().unwrap());
+    }
+    // The API alone plays nothing.
+    std::thread::sleep(Duration::from_millis(1500));
+    let (_, m) = call(a, "GET", &format!("/api/v1/matches/{}", ids[0]), None, None);
+    assert_eq!(m["status"], "queued", "{m}");
+
+    // The server tells its event stream what the other processes' workers did.
+    let (mut events, _) = subscribe(a, "/api/v1/events");
+    let mut w1 = start_worker(&dir, "w1");
+    let mut w2 = start_worker(&dir, "w2");
+    // A second live process under a taken name is refused, and changes nothing.
+    let dup = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["worker", "--config"])
+        .arg(dir.join("server.toml"))
+        .args(["--name", "w1"])
+        .output()
+        .unwrap();
+    assert!(!dup.status.success());
+    assert!(
+        String::from_utf8_lossy(&dup.stderr).contains("a worker named 'w1'"),
+        "{}",
+        String::from_utf8_lossy(&dup.stderr)
+    );
+
+    // kill -9 w1 in the middle of a match: its lease runs out and the match is played again.
+    let killed = wait_holding(a, "w1");
+    w1.child.kill().unwrap();
+    w1.child.wait().unwrap();
+    // SIGTERM w2 in the middle of a match: it finishes and stores it, then exits 0.
+    let stopped = wait_holding(a, "w2");
+    let term = Command::new("kill")
+        .args(["-TERM", &w2.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(term.success());
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = w2.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "no exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success(), "exit status {status:?}");
+    let (_, m) = call(a, "GET", &format!("/api/v1/matches/{stopped}"), None, None);
+    assert_eq!(
+        (m["status"].as_str(), m["worker"].as_str()),
+        (Some("done"), Some("w2")),
+        "{m}"
+    );
+
+    // A third worker plays the rest, the killed worker's match once its lease is gone.
+    let _w3 = start_worker(&dir, "w3");
+    let mut done = Vec::new();
+    for &id in &ids {
+        done.push(wait_for(a, id, "done", Duration::from_secs(600)));
+    }
+    let (_, list) = call(a, "GET", "/api/v1/matches?limit=1000", None, None);
+    assert_eq!(
+        list["matches"].as_array().unwrap().len() as i64,
+        MATCHES,
+        "no duplicate match"
+    );
+    for m in &done {
+        let log = m["rally_log"].as_array().unwrap();
+        let idx: Vec<i64> = log.iter().map(|r| r["idx"].as_i64().unwrap()).collect();
+        assert_eq!(
+            idx,
+            (0..RALLIES).collect::<Vec<_>>(),
+            "every rally once: {m}"
+        );
+    }
+    let again = done.iter().find(|m| m["id"] == killed).unwrap();
+    assert!(again["attempts"].as_i64().unwrap() >= 2, "{again}");
+    assert_ne!(again["worker"], "w1", "{again}");
+
+    let mut told: Vec<i64> = Vec::new();
+    let t0 = Instant::now();
+    while !ids.iter().all(|id| told.contains(id)) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "done events for {told:?} of {ids:?}"
+        );
+        let mut line = String::new();
+        events.read_line(&mut line).unwrap();
+        if let Some(data) = line.trim().strip_prefix("data:") {
+            let e: Value = serde_json::from_str(data.trim()).unwrap();
+            if e["kind"] == "match" && e["status"] == "done" {
+                told.push(e["id"].as_i64().unwrap());
+            }
+        }
+    }
+
+    // Each store counted once, on the worker that made it.
+    let (_, w) = call(a, "GET", "/api/v1/workers", None, None);
+    let workers = w["workers"].as_array().unwrap();
+    let played: i64 = workers
+        .iter()
+        .map(|x| x["matches_played"].as_i64().unwrap())
+        .sum();
+    assert_eq!(played, MATCHES, "{w}");
+    let get = |n: &str| workers.iter().find(|x| x["name"] == n).unwrap().clone();
+    assert_eq!(get("w2")["status"], "stopped", "{w}");
+    assert_eq!(get("w1")["alive"], false, "{w}");
+    assert_eq!(get("w3")["alive"], true, "{w}");
+
+    // The results are the ones `rally match` gives for the same agents and seed: the match played
+    // twice, and the one finished under SIGTERM.
+    for id in [killed, stopped] {
+        let m = done.iter().find(|m| m["id"] == id).unwrap();
+        let k = ids.iter().position(|&i| i == id).unwrap();
+        let (x, y) = pairs[k % 2];
+        let (points, lengths) = played_alone(x, y, m["seed"].as_i64().unwrap());
+        assert_eq!(json!([m["points_a"], m["points_b"]]), points, "{m}");
+        let stored: Vec<i64> = m["rally_log"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["length"].as_i64().unwrap())
+            .collect();
+        assert_eq!(stored, lengths, "{m}");
+    }
+}
