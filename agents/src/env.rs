@@ -35,6 +35,12 @@ pub struct RewardTerms {
     /// Command (sparse, at contact): `exp(−|v − v̂|)`, the paddle's velocity against the planned
     /// racket velocity (paper §IV-B; not in the official code's list: ours).
     pub velocity: f64,
+    /// Command (sparse, at first contact): `exp(−|v_b − v̂_o|)`, the ball's velocity as it leaves the
+    /// paddle against the planned outgoing velocity (ours; 0 unless weighted): a graded signal for
+    /// the strokes the task terms only call faults (most returns that go out leave 1–2 m/s too
+    /// steep, agents/examples/strokes.rs).
+    #[serde(default)]
+    pub ball_out: f64,
     /// Task (sparse, once per ball): the paddle touched the ball (official ×100).
     pub hit: f64,
     /// Task (sparse, once per ball): the return is predicted to land on the other half (official ×100).
@@ -64,6 +70,7 @@ impl RewardTerms {
             + w.position * self.position
             + w.orientation * self.orientation
             + w.velocity * self.velocity
+            + w.ball_out * self.ball_out
             + w.hit * self.hit
             + w.landing * self.landing
             + w.centre * self.centre
@@ -94,6 +101,7 @@ impl Default for RewardWeights {
             position: 20.0,
             orientation: 10.0,
             velocity: 20.0,
+            ball_out: 0.0,
             hit: 100.0,
             landing: 100.0,
             centre: 100.0,
@@ -219,6 +227,10 @@ impl StrokeReward {
         if contact {
             if let Some(plan) = plan {
                 terms.velocity = velocity_term(&robot.paddle.lin_vel, plan);
+                if terms.hit == 1.0 {
+                    let v = robot.frame.vector_from_world(&ball_world.vel);
+                    terms.ball_out = (-(v - plan.v_out).norm()).exp();
+                }
             }
         }
         let mut paid = false;
