@@ -228,7 +228,7 @@ async fn list_workers(State(s): State<AppState>) -> ApiResult<Json<Value>> {
             let age = (now - w.heartbeat_ms).max(0);
             let mut v = json!(w);
             v["seconds_since_heartbeat"] = json!(age as f64 / 1000.0);
-            v["alive"] = json!(w.status == "running" && age < lease);
+            v["alive"] = json!(w.status == db::WorkerStatus::Running && age < lease);
             v["matches_running"] = json!(holding);
             v
         })
@@ -349,7 +349,7 @@ async fn live_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiRes
     if let Some(w) = m
         .worker
         .as_deref()
-        .filter(|w| rx.is_none() && m.status == "running" && *w != s.worker.as_str())
+        .filter(|w| rx.is_none() && m.status == db::MatchStatus::Running && *w != s.worker.as_str())
     {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
@@ -361,7 +361,7 @@ async fn live_match(State(s): State<AppState>, Path(id): Path<String>) -> ApiRes
     }
     // Claimed a moment ago: its worker registers the feed as it starts; give it a second.
     let mut tries = 0;
-    while rx.is_none() && m.status == "running" && tries < 20 {
+    while rx.is_none() && m.status == db::MatchStatus::Running && tries < 20 {
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
         rx = lookup()?;
         tries += 1;
@@ -409,7 +409,7 @@ async fn get_agent(State(s): State<AppState>, Path(id): Path<String>) -> ApiResu
         .collect::<Vec<_>>());
     // A trained checkpoint's provenance and learning curve, as the checkpoint carries them.
     v["training"] = match db::agent_spec(&s.pool, id).await? {
-        Some((kind, spec)) if kind == "checkpoint" => {
+        Some((db::AgentKind::Checkpoint, spec)) => {
             serde_json::from_str::<Value>(&spec).map_or(Value::Null, |c| c["training"].clone())
         }
         _ => Value::Null,
@@ -631,7 +631,7 @@ async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Resp
         Err(e) => return Err(e.into()),
     };
     tracing::info!(id, name = %body.name, hit = qual.1, success = qual.2, "agent submitted");
-    s.publish("agent", id, None);
+    s.publish_agent(id);
     let agent = db::agent(&s.pool, id).await?;
     Ok((
         StatusCode::CREATED,
@@ -807,7 +807,7 @@ async fn queue_match(
         ..db::Origin::default()
     };
     let id = db::queue_match(&s.pool, &a, &b, q.rallies, seed, true, origin).await?;
-    s.publish("match", id, Some("queued"));
+    s.publish_match(id, db::MatchStatus::Queued);
     s.wake.notify_one();
     let m = db::match_row(&s.pool, id).await?;
     Ok((
@@ -825,15 +825,11 @@ async fn list_matches(
     only_params(&q, &["agent", "status", "limit", "before"])?;
     let agent = q.get("agent").map(|a| parse_id(a, "agent")).transpose()?;
     let before = q.get("before").map(|b| parse_id(b, "before")).transpose()?;
-    let status = q.get("status").map(String::as_str);
-    if let Some(st) = status {
-        if !["queued", "running", "done", "failed", "cancelled"].contains(&st) {
-            return Err(ApiError::bad(
-                "status",
-                "status must be one of queued, running, done, failed, cancelled",
-            ));
-        }
-    }
+    let status = q
+        .get("status")
+        .map(|st| st.parse::<db::MatchStatus>())
+        .transpose()
+        .map_err(|e| ApiError::bad("status", format!("status {e}")))?;
     let limit = limit_param(&q, 100, 1000)?;
     let filter = db::MatchFilter {
         agent,
@@ -888,7 +884,7 @@ async fn cancel_match(
             m.status
         )));
     }
-    s.publish("match", id, Some("cancelled"));
+    s.publish_match(id, db::MatchStatus::Cancelled);
     Ok(Json(json!(db::match_row(&s.pool, id).await?)))
 }
 
@@ -909,7 +905,7 @@ async fn get_replay(
             .filter(|&r| r >= 0)
             .ok_or_else(|| ApiError::bad("rally", format!("'{r}' is not a rally index")))?,
     };
-    if m.status != "done" {
+    if m.status != db::MatchStatus::Done {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
             "not_done",

@@ -12,6 +12,7 @@
 pub mod api;
 pub mod board;
 pub mod db;
+pub mod domain;
 pub mod page;
 pub mod ratings;
 pub mod replay;
@@ -169,9 +170,9 @@ pub struct ServerEvent {
     pub kind: &'static str,
     /// The match's or the agent's id.
     pub id: i64,
-    /// A match's new status ("queued", "running", "done", "failed", "cancelled"); none for agents.
+    /// A match's new status; none for agents.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub status: Option<&'static str>,
+    pub status: Option<domain::MatchStatus>,
 }
 
 /// Events kept for a slow subscriber before it starts missing some (it is told, and refreshes).
@@ -186,8 +187,21 @@ pub const LIVE_BUFFER: usize = 4;
 impl AppState {
     /// Publishes an event to every subscriber; never waits (a subscriber that lags loses the oldest
     /// events, not the sender's time), and having no subscriber is fine.
-    pub fn publish(&self, kind: &'static str, id: i64, status: Option<&'static str>) {
-        let _ = self.events.send(ServerEvent { kind, id, status });
+    pub fn publish_match(&self, id: i64, status: domain::MatchStatus) {
+        let _ = self.events.send(ServerEvent {
+            kind: "match",
+            id,
+            status: Some(status),
+        });
+    }
+
+    /// Publishes that agent `id` was registered (see [`AppState::publish_match`]).
+    pub fn publish_agent(&self, id: i64) {
+        let _ = self.events.send(ServerEvent {
+            kind: "agent",
+            id,
+            status: None,
+        });
     }
 }
 
@@ -405,7 +419,7 @@ async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
             report.effort.value,
         );
         let id = db::insert_checkpoint_agent(&state.pool, &name, &text, qual, true, None).await?;
-        state.publish("agent", id, None);
+        state.publish_agent(id);
         tracing::info!(%name, hit = qual.1, success = qual.2, "built-in checkpoint registered");
     }
     Ok(())

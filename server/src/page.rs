@@ -66,7 +66,7 @@ mod tests {
         let a = crate::db::Agent {
             id: 1,
             name: String::new(),
-            kind: String::new(),
+            kind: crate::db::AgentKind::Scripted,
             spec_hash: String::new(),
             builtin: true,
             created_at: String::new(),

@@ -32,15 +32,18 @@ use tokio::task::JoinHandle;
 use crate::{db, AppState};
 
 /// Builds the player recipe of a stored agent.
-pub fn player_spec(state: &AppState, kind: &str, spec: &str) -> Result<PlayerSpec, String> {
+pub fn player_spec(
+    state: &AppState,
+    kind: db::AgentKind,
+    spec: &str,
+) -> Result<PlayerSpec, String> {
     match kind {
-        "scripted" => {
+        db::AgentKind::Scripted => {
             PlayerSpec::scripted(spec).ok_or_else(|| format!("unknown scripted agent '{spec}'"))
         }
-        "checkpoint" => agents::checkpoint::Checkpoint::from_json(spec, &state.model)
+        db::AgentKind::Checkpoint => agents::checkpoint::Checkpoint::from_json(spec, &state.model)
             .map(|c| PlayerSpec::Checkpoint(Arc::new(c)))
             .map_err(|e| e.to_string()),
-        other => Err(format!("unknown agent kind '{other}'")),
     }
 }
 
@@ -126,15 +129,15 @@ pub fn play(
 pub fn resimulate_rally(
     state: &AppState,
     m: &db::Match,
-    agents: [(String, String); 2],
+    agents: [(db::AgentKind, String); 2],
     k: u32,
 ) -> Result<Vec<agents::matchrun::Frame>, String> {
     let [(ka, sa), (kb, sb)] = agents;
     if !specs_unchanged(m, &sa, &sb) {
         return Err("an agent's spec changed since the match was played".into());
     }
-    let a = player_spec(state, &ka, &sa)?;
-    let b = player_spec(state, &kb, &sb)?;
+    let a = player_spec(state, ka, &sa)?;
+    let b = player_spec(state, kb, &sb)?;
     agents::matchrun::replay_rally(&match_spec(state, m)?, &a, &b, k).map(|(_, frames)| frames)
 }
 
@@ -173,15 +176,15 @@ async fn run_one(state: &AppState, m: db::Match, lease: db::Lease) -> anyhow::Re
     if !specs_unchanged(&m, &sa, &sb) {
         let error = "an agent's spec changed since the match was queued";
         if db::fail(&state.pool, &lease, error).await? == db::Stored::Done {
-            state.publish("match", id, Some("failed"));
+            state.publish_match(id, db::MatchStatus::Failed);
         }
         return Ok(());
     }
     let st = state.clone();
     let started = std::time::Instant::now();
     let result = tokio::task::spawn_blocking(move || {
-        let a = player_spec(&st, &ka, &sa)?;
-        let b = player_spec(&st, &kb, &sb)?;
+        let a = player_spec(&st, ka, &sa)?;
+        let b = player_spec(&st, kb, &sb)?;
         play(&st, &m, &a, &b)
     })
     .await;
@@ -210,20 +213,26 @@ async fn run_one(state: &AppState, m: db::Match, lease: db::Lease) -> anyhow::Re
                 ?stored,
                 "match finished"
             );
-            (stored, "done")
+            (stored, db::MatchStatus::Done)
         }
         Ok(Err(e)) => {
             tracing::warn!(id, error = %e, "match failed");
-            (db::fail(&state.pool, &lease, &e).await?, "failed")
+            (
+                db::fail(&state.pool, &lease, &e).await?,
+                db::MatchStatus::Failed,
+            )
         }
         Err(join) => {
             let e = format!("match worker panicked: {join}");
             tracing::error!(id, error = %e);
-            (db::fail(&state.pool, &lease, &e).await?, "failed")
+            (
+                db::fail(&state.pool, &lease, &e).await?,
+                db::MatchStatus::Failed,
+            )
         }
     };
     match stored {
-        db::Stored::Done => state.publish("match", id, Some(status)),
+        db::Stored::Done => state.publish_match(id, status),
         db::Stored::Cancelled => {}
         db::Stored::LeaseLost => tracing::warn!(
             id,
@@ -239,7 +248,7 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     let queued = db::matches(
         &state.pool,
         db::MatchFilter {
-            status: Some("queued"),
+            status: Some(db::MatchStatus::Queued),
             ..db::MatchFilter::default()
         },
         1,
@@ -382,7 +391,7 @@ impl Workers {
                         let notified = state.wake.notified();
                         match db::workers::claim(&state.pool, &state.worker, lease_ms).await {
                             Ok(Some((m, lease))) => {
-                                state.publish("match", m.id, Some("running"));
+                                state.publish_match(m.id, db::MatchStatus::Running);
                                 if let Err(e) = run_one(&state, m, lease).await {
                                     tracing::error!(worker = w, error = %e, "storing a match failed");
                                 }
@@ -464,7 +473,7 @@ pub fn spawn_background(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandl
             };
             for (id, _) in &now {
                 if !last.iter().any(|(l, _)| l == id) && !local(*id) {
-                    state.publish("match", *id, Some("running"));
+                    state.publish_match(*id, db::MatchStatus::Running);
                 }
             }
             for (id, was_local) in &last {
@@ -472,13 +481,7 @@ pub fn spawn_background(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandl
                     continue;
                 }
                 if let Ok(Some(m)) = db::match_row(&state.pool, *id).await {
-                    let status = match m.status.as_str() {
-                        "done" => "done",
-                        "failed" => "failed",
-                        "cancelled" => "cancelled",
-                        _ => "queued",
-                    };
-                    state.publish("match", *id, Some(status));
+                    state.publish_match(*id, m.status);
                 }
             }
             last = now.iter().map(|(id, _)| (*id, local(*id))).collect();

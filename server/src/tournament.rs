@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use serde::Serialize;
 
-use crate::db::Match;
+use crate::db::{Match, MatchStatus};
 
 /// Kinds of tournament.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -152,12 +152,12 @@ pub fn view(kind: Kind, agents: &[(i64, String)], matches: &[Match]) -> View {
         })
         .collect();
     for m in matches {
-        match m.status.as_str() {
-            "queued" => progress.queued += 1,
-            "running" => progress.running += 1,
-            "failed" => progress.failed += 1,
-            "cancelled" => progress.cancelled += 1,
-            _ => progress.done += 1,
+        match m.status {
+            MatchStatus::Queued => progress.queued += 1,
+            MatchStatus::Running => progress.running += 1,
+            MatchStatus::Failed => progress.failed += 1,
+            MatchStatus::Cancelled => progress.cancelled += 1,
+            MatchStatus::Done => progress.done += 1,
         }
         let (Some(pa), Some(pb)) = (m.points_a, m.points_b) else {
             continue;
@@ -240,7 +240,7 @@ mod tests {
 
     fn m(id: i64, a: i64, b: i64, status: &str, points: Option<(i64, i64)>) -> Match {
         Match {
-            status: status.into(),
+            status: status.parse().unwrap(),
             points_a: points.map(|p| p.0),
             points_b: points.map(|p| p.1),
             tournament_id: Some(1),

@@ -10,6 +10,8 @@ use sqlx::{FromRow, SqlitePool};
 
 use agents::matchrun::MatchRecord;
 
+pub use crate::domain::{AgentKind, MatchStatus, SprtStatus, WorkerStatus};
+
 pub mod workers;
 pub use workers::Lease;
 
@@ -65,8 +67,8 @@ pub struct Agent {
     pub id: i64,
     /// Unique name.
     pub name: String,
-    /// "scripted" or "checkpoint".
-    pub kind: String,
+    /// What it is.
+    pub kind: AgentKind,
     /// Hash of its spec.
     pub spec_hash: String,
     /// Registered by the server itself.
@@ -112,7 +114,7 @@ pub async fn agent_by_name(pool: &SqlitePool, name: &str) -> sqlx::Result<Option
 }
 
 /// An agent's kind and spec (for playing it).
-pub async fn agent_spec(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<(String, String)>> {
+pub async fn agent_spec(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<(AgentKind, String)>> {
     sqlx::query_as("SELECT kind, spec FROM agents WHERE id = ?")
         .bind(id)
         .fetch_optional(pool)
@@ -171,8 +173,8 @@ pub struct Match {
     pub spec_hash_b: String,
     /// Replay frames are stored.
     pub keep_replay: bool,
-    /// queued | running | done | failed | cancelled.
-    pub status: String,
+    /// Where it is in its life.
+    pub status: MatchStatus,
     /// When queued.
     pub created_at: String,
     /// When a worker took it.
@@ -232,7 +234,7 @@ impl Match {
             spec_hash_a: String::new(),
             spec_hash_b: String::new(),
             keep_replay: true,
-            status: "queued".into(),
+            status: MatchStatus::Queued,
             created_at: String::new(),
             started_at: None,
             finished_at: None,
@@ -307,11 +309,11 @@ pub async fn match_row(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Match>
 
 /// Which matches to list.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct MatchFilter<'a> {
+pub struct MatchFilter {
     /// Only those this agent played.
     pub agent: Option<i64>,
     /// Only those in this status.
-    pub status: Option<&'a str>,
+    pub status: Option<MatchStatus>,
     /// Only those with a smaller id (the next page after the last id seen).
     pub before: Option<i64>,
 }
@@ -319,7 +321,7 @@ pub struct MatchFilter<'a> {
 /// Matches, newest first, filtered.
 pub async fn matches(
     pool: &SqlitePool,
-    filter: MatchFilter<'_>,
+    filter: MatchFilter,
     limit: i64,
 ) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
@@ -464,12 +466,12 @@ pub async fn store_result(
 
 /// Why a worker's write under its lease matched no row: the match was cancelled, or the lease lost.
 async fn lost_or_cancelled(pool: &SqlitePool, id: i64) -> sqlx::Result<Stored> {
-    let status: Option<(String,)> = sqlx::query_as("SELECT status FROM matches WHERE id = ?")
+    let status: Option<(MatchStatus,)> = sqlx::query_as("SELECT status FROM matches WHERE id = ?")
         .bind(id)
         .fetch_optional(pool)
         .await?;
     Ok(match status {
-        Some((s,)) if s == "cancelled" => Stored::Cancelled,
+        Some((MatchStatus::Cancelled,)) => Stored::Cancelled,
         _ => Stored::LeaseLost,
     })
 }
@@ -490,7 +492,7 @@ pub async fn fail(pool: &SqlitePool, lease: &Lease, error: &str) -> sqlx::Result
         return lost_or_cancelled(pool, lease.match_id).await;
     };
     if let Some(sprt) = sprt {
-        end_sprt(&mut tx, sprt, "failed").await?;
+        end_sprt(&mut tx, sprt, SprtStatus::Failed).await?;
     }
     tx.commit().await?;
     Ok(Stored::Done)
@@ -505,7 +507,7 @@ pub async fn cancel(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
         .fetch_optional(&mut *tx)
         .await?;
     if let Some((Some(sprt),)) = r {
-        end_sprt(&mut tx, sprt, "cancelled").await?;
+        end_sprt(&mut tx, sprt, SprtStatus::Cancelled).await?;
     }
     tx.commit().await?;
     Ok(r.is_some())
@@ -897,8 +899,8 @@ pub struct Sprt {
     pub max_matches: i64,
     /// Seed of the first match (the k-th gets seed + k).
     pub seed: i64,
-    /// running | accepted_h1 | accepted_h0 | inconclusive | failed | cancelled.
-    pub status: String,
+    /// Where it is in its life.
+    pub status: SprtStatus,
     /// Log-likelihood ratio after the finished matches.
     pub llr: f64,
     /// Finished matches.
@@ -998,7 +1000,7 @@ pub async fn sprt_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>
 pub async fn end_sprt(
     conn: &mut sqlx::SqliteConnection,
     id: i64,
-    status: &str,
+    status: SprtStatus,
 ) -> sqlx::Result<bool> {
     let r = sqlx::query("UPDATE sprts SET status = ?, finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status = 'running'")
         .bind(status)
@@ -1015,7 +1017,7 @@ pub async fn end_sprt(
 /// Cancels a running SPRT (one transaction); false if it had ended.
 pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
     let mut tx = pool.begin().await?;
-    let ended = end_sprt(&mut tx, id, "cancelled").await?;
+    let ended = end_sprt(&mut tx, id, SprtStatus::Cancelled).await?;
     tx.commit().await?;
     Ok(ended)
 }
@@ -1030,7 +1032,7 @@ async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<(
         .bind(id)
         .fetch_optional(&mut *conn)
         .await?;
-    let Some(s) = s.filter(|s| s.status == "running") else {
+    let Some(s) = s.filter(|s| s.status == SprtStatus::Running) else {
         return Ok(());
     };
     let done: Vec<(i64, i64, i64)> = sqlx::query_as("SELECT agent_a, points_a, points_b FROM matches WHERE sprt_id = ? AND status = 'done' ORDER BY id")
@@ -1045,13 +1047,13 @@ async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<(
     let (lower, upper) = crate::ratings::sprt_bounds(s.alpha, s.beta);
     let n = done.len() as i64;
     let status = if llr >= upper {
-        "accepted_h1"
+        SprtStatus::AcceptedH1
     } else if llr <= lower {
-        "accepted_h0"
+        SprtStatus::AcceptedH0
     } else if n >= s.max_matches {
-        "inconclusive"
+        SprtStatus::Inconclusive
     } else {
-        "running"
+        SprtStatus::Running
     };
     sqlx::query("UPDATE sprts SET llr = ?, matches_done = ?, status = ?, finished_at = CASE WHEN ? = 'running' THEN NULL ELSE CURRENT_TIMESTAMP END WHERE id = ?")
         .bind(llr)
@@ -1061,7 +1063,7 @@ async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<(
         .bind(id)
         .execute(&mut *conn)
         .await?;
-    if status != "running" {
+    if status != SprtStatus::Running {
         return Ok(());
     }
     let sql = format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = ?");

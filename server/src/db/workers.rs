@@ -47,9 +47,9 @@ pub struct Worker {
     pub heartbeat_ms: i64,
     /// Matches it stored.
     pub matches_played: i64,
-    /// "running" or "stopped" (by itself, after SIGTERM); a worker that died stays "running" with an
-    /// old heartbeat.
-    pub status: String,
+    /// Running, or stopped by itself (after SIGTERM); a worker that died stays running with an old
+    /// heartbeat.
+    pub status: super::WorkerStatus,
 }
 
 /// Queues again every running match whose lease ran out before `now` (its worker died, hung or lost
