@@ -1,0 +1,333 @@
+//! Tournaments and SPRTs (the API's `api/contests.rs`): creating, reading, cancelling, and the SPRT's
+//! step after each of its matches.
+
+use super::*;
+
+/// A tournament row.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct Tournament {
+    /// Id.
+    pub id: i64,
+    /// round_robin | gauntlet.
+    pub kind: String,
+    /// Agent ids (JSON array) in the order given.
+    pub agents_json: String,
+    /// Rallies per match.
+    pub rallies_per_match: i64,
+    /// Rounds.
+    pub rounds: i64,
+    /// Seed of its first match (the k-th gets seed + k).
+    pub seed: i64,
+    /// The submitter token that created it (null: the admin).
+    pub created_by: Option<i64>,
+    /// When created.
+    pub created_at: String,
+}
+
+/// A tournament to create: its agents and the (side A, side B) index pairs of its matches.
+#[derive(Debug, Clone, Copy)]
+pub struct TournamentPlan<'a> {
+    /// round_robin | gauntlet.
+    pub kind: &'a str,
+    /// The agents in the order given.
+    pub agents: &'a [Agent],
+    /// Its matches, indices into `agents`.
+    pub pairs: &'a [(usize, usize)],
+    /// Rallies per match.
+    pub rallies: u32,
+    /// Rounds.
+    pub rounds: u32,
+    /// Seed of the first match.
+    pub seed: u64,
+    /// The submitter token that asked for it.
+    pub created_by: Option<i64>,
+}
+
+/// Creates a tournament and queues all its matches, in one transaction; its id.
+pub async fn create_tournament(pool: &SqlitePool, plan: TournamentPlan<'_>) -> sqlx::Result<i64> {
+    let TournamentPlan {
+        kind,
+        agents,
+        pairs,
+        rallies,
+        rounds,
+        seed,
+        created_by,
+    } = plan;
+    let mut tx = pool.begin().await?;
+    let ids: Vec<i64> = agents.iter().map(|a| a.id).collect();
+    let t = sqlx::query("INSERT INTO tournaments (kind, agents_json, rallies_per_match, rounds, seed, created_by) VALUES (?, ?, ?, ?, ?, ?)")
+        .bind(kind)
+        .bind(serde_json::to_string(&ids).unwrap_or_default())
+        .bind(rallies as i64)
+        .bind(rounds as i64)
+        .bind(seed as i64)
+        .bind(created_by)
+        .execute(&mut *tx)
+        .await?
+        .last_insert_rowid();
+    for (k, &(a, b)) in pairs.iter().enumerate() {
+        let origin = Origin {
+            tournament: Some(t),
+            sprt: None,
+            created_by,
+        };
+        let seed = seed.wrapping_add(k as u64) & (i64::MAX as u64);
+        queue_match(
+            &mut *tx, &agents[a], &agents[b], rallies, seed, true, origin,
+        )
+        .await?;
+    }
+    tx.commit().await?;
+    Ok(t)
+}
+
+/// One tournament.
+pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tournament>> {
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments WHERE id = ?")
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+}
+
+/// Tournaments, newest first.
+pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tournament>> {
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments ORDER BY id DESC LIMIT ?")
+        .bind(limit)
+        .fetch_all(pool)
+        .await
+}
+
+/// A tournament's matches in the order they were queued.
+pub async fn tournament_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
+    sqlx::query_as(&format!(
+        "SELECT {cols} FROM matches WHERE tournament_id = ? ORDER BY id",
+        cols = match_columns()
+    ))
+    .bind(id)
+    .fetch_all(pool)
+    .await
+}
+
+/// Cancels a tournament's queued and running matches; how many.
+pub async fn cancel_tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<u64> {
+    let r = sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE tournament_id = ? AND status IN ('queued', 'running')")
+        .bind(id)
+        .execute(pool)
+        .await?;
+    Ok(r.rows_affected())
+}
+
+/// An SPRT row.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct Sprt {
+    /// Id.
+    pub id: i64,
+    /// The agent tested.
+    pub agent_a: i64,
+    /// Its opponent.
+    pub agent_b: i64,
+    /// H0: A's Elo advantage on points is elo0.
+    pub elo0: f64,
+    /// H1: it is elo1.
+    pub elo1: f64,
+    /// False-positive rate.
+    pub alpha: f64,
+    /// False-negative rate.
+    pub beta: f64,
+    /// Rallies per match.
+    pub rallies_per_match: i64,
+    /// Matches after which it stops undecided.
+    pub max_matches: i64,
+    /// Seed of the first match (the k-th gets seed + k).
+    pub seed: i64,
+    /// Where it is in its life.
+    pub status: SprtStatus,
+    /// Log-likelihood ratio after the finished matches.
+    pub llr: f64,
+    /// Finished matches.
+    pub matches_done: i64,
+    /// The submitter token that created it (null: the admin).
+    pub created_by: Option<i64>,
+    /// When created.
+    pub created_at: String,
+    /// When it ended.
+    pub finished_at: Option<String>,
+}
+
+const SPRT_COLUMNS: &str = "id, agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, llr, matches_done, created_by, created_at, finished_at";
+
+/// The parameters of a new SPRT.
+#[derive(Debug, Clone, Copy)]
+pub struct SprtParams {
+    /// H0 Elo.
+    pub elo0: f64,
+    /// H1 Elo.
+    pub elo1: f64,
+    /// False-positive rate.
+    pub alpha: f64,
+    /// False-negative rate.
+    pub beta: f64,
+    /// Rallies per match.
+    pub rallies: u32,
+    /// Most matches.
+    pub max_matches: u32,
+    /// First seed.
+    pub seed: u64,
+}
+
+/// Creates an SPRT and queues its first match, in one transaction; its id.
+pub async fn create_sprt(
+    pool: &SqlitePool,
+    a: &Agent,
+    b: &Agent,
+    p: SprtParams,
+    created_by: Option<i64>,
+) -> sqlx::Result<i64> {
+    let mut tx = pool.begin().await?;
+    let id = sqlx::query("INSERT INTO sprts (agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, created_by) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'running', ?)")
+        .bind(a.id)
+        .bind(b.id)
+        .bind(p.elo0)
+        .bind(p.elo1)
+        .bind(p.alpha)
+        .bind(p.beta)
+        .bind(p.rallies as i64)
+        .bind(p.max_matches as i64)
+        .bind(p.seed as i64)
+        .bind(created_by)
+        .execute(&mut *tx)
+        .await?
+        .last_insert_rowid();
+    let origin = Origin {
+        tournament: None,
+        sprt: Some(id),
+        created_by,
+    };
+    queue_match(&mut *tx, a, b, p.rallies, p.seed, false, origin).await?;
+    tx.commit().await?;
+    Ok(id)
+}
+
+/// One SPRT.
+pub async fn sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Sprt>> {
+    sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+}
+
+/// SPRTs, newest first.
+pub async fn sprts(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
+    sqlx::query_as(&format!(
+        "SELECT {SPRT_COLUMNS} FROM sprts ORDER BY id DESC LIMIT ?"
+    ))
+    .bind(limit)
+    .fetch_all(pool)
+    .await
+}
+
+/// An SPRT's matches in order.
+pub async fn sprt_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
+    sqlx::query_as(&format!(
+        "SELECT {cols} FROM matches WHERE sprt_id = ? ORDER BY id",
+        cols = match_columns()
+    ))
+    .bind(id)
+    .fetch_all(pool)
+    .await
+}
+
+/// Ends a running SPRT with `status` and cancels its unfinished matches; false if it had ended.
+pub async fn end_sprt(
+    conn: &mut sqlx::SqliteConnection,
+    id: i64,
+    status: SprtStatus,
+) -> sqlx::Result<bool> {
+    let r = sqlx::query("UPDATE sprts SET status = ?, finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status = 'running'")
+        .bind(status)
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+    sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE sprt_id = ? AND status IN ('queued', 'running')")
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Cancels a running SPRT (one transaction); false if it had ended.
+pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
+    let mut tx = pool.begin().await?;
+    let ended = end_sprt(&mut tx, id, SprtStatus::Cancelled).await?;
+    tx.commit().await?;
+    Ok(ended)
+}
+
+/// After one of its matches finished (inside the transaction that stored it): recomputes the SPRT's
+/// log-likelihood ratio over its finished matches, ends it when the ratio leaves the bounds or
+/// `max_matches` are played, and otherwise queues the next match (sides swapped every match, the
+/// k-th with seed plus k). One match at a time, so the test's course depends only on its seeds. SPRT
+/// matches keep no replay frames (the replay endpoint re-simulates a rally on request).
+pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<()> {
+    let s: Option<Sprt> = sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
+        .bind(id)
+        .fetch_optional(&mut *conn)
+        .await?;
+    let Some(s) = s.filter(|s| s.status == SprtStatus::Running) else {
+        return Ok(());
+    };
+    let done: Vec<(i64, i64, i64)> = sqlx::query_as("SELECT agent_a, points_a, points_b FROM matches WHERE sprt_id = ? AND status = 'done' ORDER BY id")
+        .bind(id)
+        .fetch_all(&mut *conn)
+        .await?;
+    let scores: Vec<f64> = done
+        .iter()
+        .filter_map(|&(a, pa, pb)| crate::ratings::share_of(s.agent_a, a, pa, pb))
+        .collect();
+    let llr = crate::ratings::sprt_llr(&scores, s.rallies_per_match as f64, s.elo0, s.elo1);
+    let (lower, upper) = crate::ratings::sprt_bounds(s.alpha, s.beta);
+    let n = done.len() as i64;
+    let status = if llr >= upper {
+        SprtStatus::AcceptedH1
+    } else if llr <= lower {
+        SprtStatus::AcceptedH0
+    } else if n >= s.max_matches {
+        SprtStatus::Inconclusive
+    } else {
+        SprtStatus::Running
+    };
+    sqlx::query("UPDATE sprts SET llr = ?, matches_done = ?, status = ?, finished_at = CASE WHEN ? = 'running' THEN NULL ELSE CURRENT_TIMESTAMP END WHERE id = ?")
+        .bind(llr)
+        .bind(n)
+        .bind(status)
+        .bind(status)
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+    if status != SprtStatus::Running {
+        return Ok(());
+    }
+    let sql = format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = ?");
+    let agent = |id: i64| sqlx::query_as::<_, Agent>(&sql).bind(id);
+    let a = agent(s.agent_a).fetch_one(&mut *conn).await?;
+    let b = agent(s.agent_b).fetch_one(&mut *conn).await?;
+    let (x, y) = if n % 2 == 0 { (&a, &b) } else { (&b, &a) };
+    let origin = Origin {
+        tournament: None,
+        sprt: Some(id),
+        created_by: s.created_by,
+    };
+    let seed = (s.seed as u64).wrapping_add(n as u64) & (i64::MAX as u64);
+    queue_match(
+        &mut *conn,
+        x,
+        y,
+        s.rallies_per_match as u32,
+        seed,
+        false,
+        origin,
+    )
+    .await?;
+    Ok(())
+}

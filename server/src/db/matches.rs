@@ -1,0 +1,467 @@
+//! Matches: queueing, the list, storing a played match (with its rallies, crossings, replay, drift,
+//! ratings and SPRT step) or its failure under the worker's lease, cancelling; rallies and replays.
+
+use super::*;
+
+/// A match row.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct Match {
+    /// Id.
+    pub id: i64,
+    /// Agent on side A.
+    pub agent_a: i64,
+    /// Agent on side B.
+    pub agent_b: i64,
+    /// Rallies.
+    pub rallies: i64,
+    /// Seed.
+    pub seed: i64,
+    /// Arena preset.
+    pub preset: String,
+    /// Simulator version.
+    pub sim_version: String,
+    /// Played (or queued) under another simulator version than this server's: its result stands,
+    /// but it cannot be re-simulated or played here.
+    pub outdated: bool,
+    /// Hash of A's spec when queued.
+    pub spec_hash_a: String,
+    /// Hash of B's spec when queued.
+    pub spec_hash_b: String,
+    /// Replay frames are stored.
+    pub keep_replay: bool,
+    /// Where it is in its life.
+    pub status: MatchStatus,
+    /// When queued.
+    pub created_at: String,
+    /// When a worker took it.
+    pub started_at: Option<String>,
+    /// When it finished.
+    pub finished_at: Option<String>,
+    /// Points of A.
+    pub points_a: Option<i64>,
+    /// Points of B.
+    pub points_b: Option<i64>,
+    /// Mean rally length.
+    pub mean_rally_length: Option<f64>,
+    /// Longest rally.
+    pub max_rally_length: Option<i64>,
+    /// Fraction of crossings in the serve box.
+    pub in_box_fraction: Option<f64>,
+    /// Serve → return energy distance.
+    pub energy_distance: Option<f64>,
+    /// Drift slope.
+    pub drift_slope: Option<f64>,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// The tournament it belongs to.
+    pub tournament_id: Option<i64>,
+    /// The SPRT it belongs to.
+    pub sprt_id: Option<i64>,
+    /// The submitter token that queued it (null: the admin or the server).
+    pub created_by: Option<i64>,
+    /// The worker that holds its lease (running) or played it (done, failed).
+    pub worker: Option<String>,
+    /// How many times a worker claimed it (more than once: a worker died or lost its lease).
+    pub attempts: i64,
+}
+
+/// The columns of a [`Match`]; `outdated` compares the stored simulator version with this build's
+/// (a constant of ours, digits and dots only).
+pub(super) fn match_columns() -> String {
+    format!(
+        "id, agent_a, agent_b, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by, worker, attempts",
+        sim::SIM_VERSION
+    )
+}
+
+#[cfg(test)]
+impl Match {
+    /// A queued match row for tests (nothing played, no tournament or SPRT).
+    pub(crate) fn example(id: i64, agent_a: i64, agent_b: i64) -> Match {
+        Match {
+            id,
+            agent_a,
+            agent_b,
+            rallies: 10,
+            seed: id,
+            preset: "myochallenge".into(),
+            sim_version: String::new(),
+            outdated: false,
+            spec_hash_a: String::new(),
+            spec_hash_b: String::new(),
+            keep_replay: true,
+            status: MatchStatus::Queued,
+            created_at: String::new(),
+            started_at: None,
+            finished_at: None,
+            points_a: None,
+            points_b: None,
+            mean_rally_length: None,
+            max_rally_length: None,
+            in_box_fraction: None,
+            energy_distance: None,
+            drift_slope: None,
+            error: None,
+            tournament_id: None,
+            sprt_id: None,
+            created_by: None,
+            worker: None,
+            attempts: 0,
+        }
+    }
+}
+
+/// What queued a match, besides a plain request.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Origin {
+    /// A tournament.
+    pub tournament: Option<i64>,
+    /// An SPRT.
+    pub sprt: Option<i64>,
+    /// The submitter token that asked for it.
+    pub created_by: Option<i64>,
+}
+
+/// Queues a match (on the pool or inside a transaction).
+pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
+    db: E,
+    a: &Agent,
+    b: &Agent,
+    rallies: u32,
+    seed: u64,
+    keep_replay: bool,
+    origin: Origin,
+) -> sqlx::Result<i64> {
+    let r = sqlx::query(
+        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id, created_by) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?)",
+    )
+    .bind(a.id)
+    .bind(b.id)
+    .bind(rallies as i64)
+    .bind(seed as i64)
+    .bind(sim::arena::MYOCHALLENGE.name)
+    .bind(sim::SIM_VERSION)
+    .bind(&a.spec_hash)
+    .bind(&b.spec_hash)
+    .bind(keep_replay)
+    .bind(origin.tournament)
+    .bind(origin.sprt)
+    .bind(origin.created_by)
+    .execute(db)
+    .await?;
+    Ok(r.last_insert_rowid())
+}
+
+/// One match.
+pub async fn match_row(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Match>> {
+    sqlx::query_as(&format!(
+        "SELECT {} FROM matches WHERE id = ?",
+        match_columns()
+    ))
+    .bind(id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Which matches to list.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MatchFilter {
+    /// Only those this agent played.
+    pub agent: Option<i64>,
+    /// Only those in this status.
+    pub status: Option<MatchStatus>,
+    /// Only those with a smaller id (the next page after the last id seen).
+    pub before: Option<i64>,
+}
+
+/// Matches, newest first, filtered.
+pub async fn matches(
+    pool: &SqlitePool,
+    filter: MatchFilter,
+    limit: i64,
+) -> sqlx::Result<Vec<Match>> {
+    sqlx::query_as(&format!(
+        "SELECT {cols} FROM matches WHERE (?1 IS NULL OR agent_a = ?1 OR agent_b = ?1) AND (?2 IS NULL OR status = ?2) AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4",
+        cols = match_columns()
+    ))
+    .bind(filter.agent)
+    .bind(filter.status)
+    .bind(filter.before)
+    .bind(limit)
+    .fetch_all(pool)
+    .await
+}
+
+/// What became of a result a worker stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stored {
+    /// Written, the match done.
+    Done,
+    /// The match was cancelled meanwhile: it stays cancelled and nothing is written.
+    Cancelled,
+    /// The worker's lease was lost (the match was queued again, and maybe claimed by another
+    /// worker): nothing is written.
+    LeaseLost,
+}
+
+/// Stores a played match — rallies, crossings, replay, summary, ratings, SPRT step — and marks it
+/// done, in one transaction, under the worker's current lease (see [`workers`]).
+pub async fn store_result(
+    pool: &SqlitePool,
+    lease: &Lease,
+    r: &MatchRecord,
+    replay: &::agents::matchrun::Replay,
+) -> sqlx::Result<Stored> {
+    let id = lease.match_id;
+    // The first statement writes, so the transaction takes the write lock at once (waiting out other
+    // writers) instead of upgrading a read lock later.
+    let mut tx = pool.begin().await?;
+    let marked: Option<(i64, i64, Option<i64>)> = sqlx::query_as(
+        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ? AND status = 'running' AND worker = ? AND attempts = ? RETURNING agent_a, agent_b, sprt_id",
+    )
+    .bind(r.points[0] as i64)
+    .bind(r.points[1] as i64)
+    .bind(r.mean_rally_length)
+    .bind(r.max_rally_length as i64)
+    .bind(r.drift.in_box_fraction)
+    .bind(r.drift.energy_distance)
+    .bind(r.drift.drift_slope)
+    .bind(serde_json::to_string(&r.drift).unwrap_or_default())
+    .bind(id)
+    .bind(&lease.worker)
+    .bind(lease.attempt)
+    .fetch_optional(&mut *tx)
+    .await?;
+    let Some((agent_a, agent_b, sprt_id)) = marked else {
+        tx.rollback().await?;
+        return lost_or_cancelled(pool, id).await;
+    };
+    sqlx::query("UPDATE matches SET lease_expires_ms = NULL WHERE id = ?")
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+    sqlx::query("UPDATE workers SET matches_played = matches_played + 1 WHERE name = ?")
+        .bind(&lease.worker)
+        .execute(&mut *tx)
+        .await?;
+    for (side, agent, d) in [
+        ("A", agent_a, &r.drift_by_player[0]),
+        ("B", agent_b, &r.drift_by_player[1]),
+    ] {
+        sqlx::query("INSERT INTO match_drift (match_id, side, agent_id, crossings, in_box_fraction, energy_distance, drift_slope, drift_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?)")
+            .bind(id)
+            .bind(side)
+            .bind(agent)
+            .bind(d.crossings as i64)
+            .bind(d.in_box_fraction)
+            .bind(d.energy_distance)
+            .bind(d.drift_slope)
+            .bind(serde_json::to_string(d).unwrap_or_default())
+            .execute(&mut *tx)
+            .await?;
+    }
+    if agent_a != agent_b {
+        // Glicko-2, online: both sides' last ratings, one game won by the side with more points.
+        let last = |agent: i64| {
+            sqlx::query_as::<_, (f64, f64, f64)>("SELECT rating, deviation, volatility FROM rating_history WHERE agent_id = ? ORDER BY seq DESC LIMIT 1").bind(agent)
+        };
+        let ra = last(agent_a).fetch_optional(&mut *tx).await?;
+        let rb = last(agent_b).fetch_optional(&mut *tx).await?;
+        let (na, nb) = crate::ratings::glicko2_step(ra, rb, r.points[0], r.points[1]);
+        for (agent, g) in [(agent_a, na), (agent_b, nb)] {
+            sqlx::query("INSERT INTO rating_history (match_id, agent_id, rating, deviation, volatility) VALUES (?, ?, ?, ?, ?)")
+                .bind(id)
+                .bind(agent)
+                .bind(g.0)
+                .bind(g.1)
+                .bind(g.2)
+                .execute(&mut *tx)
+                .await?;
+        }
+    }
+    for rally in &r.rallies {
+        sqlx::query("INSERT INTO rallies (match_id, idx, server, length, end_reason, failing_side, duration) VALUES (?, ?, ?, ?, ?, ?, ?)")
+            .bind(id)
+            .bind(rally.index as i64)
+            .bind(rally.server)
+            .bind(rally.length as i64)
+            .bind(rally.end)
+            .bind(rally.failing_side)
+            .bind(rally.duration)
+            .execute(&mut *tx)
+            .await?;
+        for (seq, c) in rally.crossings.iter().enumerate() {
+            sqlx::query("INSERT INTO crossings (match_id, rally_idx, seq, receiver, exchange, y_r, z, in_box, extrapolated) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
+                .bind(id)
+                .bind(rally.index as i64)
+                .bind(seq as i64)
+                .bind(c.receiver)
+                .bind(c.exchange as i64)
+                .bind(c.y_r)
+                .bind(c.z)
+                .bind(c.in_box)
+                .bind(c.extrapolated)
+                .execute(&mut *tx)
+                .await?;
+        }
+        if let Some(frames) = replay.get(rally.index as usize).filter(|f| !f.is_empty()) {
+            sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES (?, ?, ?)")
+                .bind(id)
+                .bind(rally.index as i64)
+                .bind(gzip_json(frames))
+                .execute(&mut *tx)
+                .await?;
+        }
+    }
+    if let Some(sprt) = sprt_id {
+        sprt_step(&mut tx, sprt).await?;
+    }
+    tx.commit().await?;
+    Ok(Stored::Done)
+}
+
+/// Why a worker's write under its lease matched no row: the match was cancelled, or the lease lost.
+async fn lost_or_cancelled(pool: &SqlitePool, id: i64) -> sqlx::Result<Stored> {
+    let status: Option<(MatchStatus,)> = sqlx::query_as("SELECT status FROM matches WHERE id = ?")
+        .bind(id)
+        .fetch_optional(pool)
+        .await?;
+    Ok(match status {
+        Some((MatchStatus::Cancelled,)) => Stored::Cancelled,
+        _ => Stored::LeaseLost,
+    })
+}
+
+/// Marks a running match failed with a reason, under the worker's current lease; an SPRT it belonged
+/// to fails with it (one transaction).
+pub async fn fail(pool: &SqlitePool, lease: &Lease, error: &str) -> sqlx::Result<Stored> {
+    let mut tx = pool.begin().await?;
+    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = CURRENT_TIMESTAMP, error = ?, lease_expires_ms = NULL WHERE id = ? AND status = 'running' AND worker = ? AND attempts = ? RETURNING sprt_id")
+        .bind(error)
+        .bind(lease.match_id)
+        .bind(&lease.worker)
+        .bind(lease.attempt)
+        .fetch_optional(&mut *tx)
+        .await?;
+    let Some((sprt,)) = sprt else {
+        tx.rollback().await?;
+        return lost_or_cancelled(pool, lease.match_id).await;
+    };
+    if let Some(sprt) = sprt {
+        end_sprt(&mut tx, sprt, SprtStatus::Failed).await?;
+    }
+    tx.commit().await?;
+    Ok(Stored::Done)
+}
+
+/// Cancels a queued or running match (and the SPRT it belongs to: it cannot go on without it);
+/// false if it had already finished (or does not exist).
+pub async fn cancel(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
+    let mut tx = pool.begin().await?;
+    let r: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status IN ('queued', 'running') RETURNING sprt_id")
+        .bind(id)
+        .fetch_optional(&mut *tx)
+        .await?;
+    if let Some((Some(sprt),)) = r {
+        end_sprt(&mut tx, sprt, SprtStatus::Cancelled).await?;
+    }
+    tx.commit().await?;
+    Ok(r.is_some())
+}
+
+/// A stored rally.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct Rally {
+    /// Index in the match.
+    pub idx: i64,
+    /// Who served.
+    pub server: String,
+    /// Legal returns.
+    pub length: i64,
+    /// End reason.
+    pub end_reason: String,
+    /// Who failed.
+    pub failing_side: Option<String>,
+    /// Simulated duration, s.
+    pub duration: f64,
+}
+
+/// A match's rallies.
+pub async fn rallies(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Rally>> {
+    sqlx::query_as("SELECT idx, server, length, end_reason, failing_side, duration FROM rallies WHERE match_id = ? ORDER BY idx")
+        .bind(id)
+        .fetch_all(pool)
+        .await
+}
+
+/// A rally's replay frames (JSON), if stored.
+pub async fn replay(pool: &SqlitePool, id: i64, rally: i64) -> anyhow::Result<Option<String>> {
+    let r: Option<(Vec<u8>,)> =
+        sqlx::query_as("SELECT frames_gz FROM replays WHERE match_id = ? AND rally_idx = ?")
+            .bind(id)
+            .bind(rally)
+            .fetch_optional(pool)
+            .await?;
+    let Some((gz,)) = r else { return Ok(None) };
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&gz[..]), &mut text)?;
+    Ok(Some(text))
+}
+
+fn gzip_json<T: Serialize>(value: &T) -> Vec<u8> {
+    use std::io::Write;
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    // Writing into a Vec cannot fail; serialising plain numbers cannot either.
+    let _ = serde_json::to_writer(&mut enc, value);
+    enc.flush().ok();
+    enc.finish().unwrap_or_default()
+}
+
+/// The stored drift statistics of a match (JSON).
+pub async fn drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<String>> {
+    let r: Option<(Option<String>,)> =
+        sqlx::query_as("SELECT drift_json FROM matches WHERE id = ?")
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+    Ok(r.and_then(|x| x.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn a_match_of_another_simulator_version_says_it_is_outdated() {
+        let path =
+            std::env::temp_dir().join(format!("rally-db-outdated-{}.db", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let pool = open(&path).await.unwrap();
+        register_builtins(&pool).await.unwrap();
+        let all = agents(&pool).await.unwrap();
+        let (a, b) = (&all[0], &all[1]);
+        let now = queue_match(&pool, a, b, 2, 1, true, Origin::default())
+            .await
+            .unwrap();
+        let old = queue_match(&pool, a, b, 2, 2, true, Origin::default())
+            .await
+            .unwrap();
+        sqlx::query("UPDATE matches SET sim_version = '0.1.0' WHERE id = ?")
+            .bind(old)
+            .execute(&pool)
+            .await
+            .unwrap();
+        let row = |id| {
+            let pool = pool.clone();
+            async move { match_row(&pool, id).await.unwrap().unwrap() }
+        };
+        assert!(!row(now).await.outdated);
+        let m = row(old).await;
+        assert!(m.outdated && m.sim_version == "0.1.0");
+        // The list says so too.
+        let listed = matches(&pool, MatchFilter::default(), 10).await.unwrap();
+        assert_eq!(listed.iter().filter(|m| m.outdated).count(), 1);
+        pool.close().await;
+        let _ = std::fs::remove_file(&path);
+    }
+}

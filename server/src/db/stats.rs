@@ -1,0 +1,165 @@
+//! What the leaderboard and the agent page read: outcomes, Glicko-2 history, drift, crossings.
+
+use super::*;
+
+pub use crate::ratings::Outcome;
+
+impl From<&Agent> for crate::ratings::Entrant {
+    fn from(a: &Agent) -> Self {
+        crate::ratings::Entrant {
+            id: a.id,
+            name: a.name.clone(),
+            builtin: a.builtin,
+            hit_rate: a.hit_rate,
+            success_rate: a.success_rate,
+        }
+    }
+}
+
+/// Every finished match's outcome.
+pub async fn outcomes(pool: &SqlitePool) -> sqlx::Result<Vec<Outcome>> {
+    sqlx::query_as(
+        "SELECT agent_a, agent_b, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance FROM matches WHERE status = 'done' ORDER BY id",
+    )
+    .fetch_all(pool)
+    .await
+}
+
+/// The latest Glicko-2 rating and deviation of every agent that has one.
+pub async fn latest_glicko(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, f64, f64)>> {
+    sqlx::query_as(
+        "SELECT agent_id, rating, deviation FROM rating_history h WHERE seq = (SELECT MAX(seq) FROM rating_history WHERE agent_id = h.agent_id)",
+    )
+    .fetch_all(pool)
+    .await
+}
+
+/// Per agent: mean over its finished matches of its own side's in-box fraction and serve → return
+/// energy distance (`match_drift`).
+pub async fn agent_drift(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<f64>, Option<f64>)>> {
+    sqlx::query_as("SELECT agent_id, AVG(in_box_fraction), AVG(energy_distance) FROM match_drift GROUP BY agent_id")
+        .fetch_all(pool)
+        .await
+}
+
+/// An agent's drift over its finished matches (its side's serves and returns, `match_drift`).
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct AgentDrift {
+    /// Matches with drift statistics.
+    pub matches: i64,
+    /// Crossings counted over them.
+    pub crossings: i64,
+    /// Fraction of those crossings inside the serve box (pooled over matches).
+    pub in_box_fraction: Option<f64>,
+    /// Mean serve → return energy distance (matches that have one).
+    pub energy_distance: Option<f64>,
+    /// Mean drift slope over exchange index (matches that have one).
+    pub drift_slope: Option<f64>,
+}
+
+/// The drift summary of one agent.
+pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<AgentDrift> {
+    sqlx::query_as(
+        "SELECT COUNT(*) AS matches, COALESCE(SUM(crossings), 0) AS crossings, \
+         SUM(in_box_fraction * crossings) / NULLIF(SUM(crossings), 0) AS in_box_fraction, \
+         AVG(energy_distance) AS energy_distance, AVG(drift_slope) AS drift_slope \
+         FROM match_drift WHERE agent_id = ?",
+    )
+    .bind(agent)
+    .fetch_one(pool)
+    .await
+}
+
+/// How many of the rallies of an agent's finished matches had each length: `(length, rallies)`,
+/// by length.
+pub async fn agent_rally_lengths(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<(i64, i64)>> {
+    sqlx::query_as(
+        "SELECT r.length, COUNT(*) FROM rallies r JOIN matches m ON m.id = r.match_id \
+         WHERE m.status = 'done' AND (m.agent_a = ? OR m.agent_b = ?) GROUP BY r.length ORDER BY r.length",
+    )
+    .bind(agent)
+    .bind(agent)
+    .fetch_all(pool)
+    .await
+}
+
+/// A crossing of the hitting plane that an agent is answerable for.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct AgentCrossing {
+    /// The match.
+    pub match_id: i64,
+    /// The rally in it.
+    pub rally: i64,
+    /// 0 for a serve, k for the k-th return of the rally.
+    pub exchange: i64,
+    /// Lateral coordinate in the receiver's frame, m.
+    pub y_r: f64,
+    /// Height, m.
+    pub z: f64,
+    /// Inside the serve box.
+    pub in_box: bool,
+    /// Extrapolated (the receiver hit before the plane).
+    pub extrapolated: bool,
+}
+
+/// The crossings an agent is answerable for in its finished matches, newest match first: every
+/// serve of those rallies and the crossings its own returns produced (the same set as its side's
+/// drift statistics); at most `limit`, with the total.
+pub async fn agent_crossings(
+    pool: &SqlitePool,
+    agent: i64,
+    limit: i64,
+) -> sqlx::Result<(i64, Vec<AgentCrossing>)> {
+    const MINE: &str = "FROM crossings c JOIN matches m ON m.id = c.match_id \
+        WHERE m.status = 'done' AND ((m.agent_a = ?1 AND (c.exchange = 0 OR c.receiver = 'b')) \
+        OR (m.agent_b = ?1 AND (c.exchange = 0 OR c.receiver = 'a')))";
+    let (total,): (i64,) = sqlx::query_as(&format!("SELECT COUNT(*) {MINE}"))
+        .bind(agent)
+        .fetch_one(pool)
+        .await?;
+    let rows = sqlx::query_as(&format!(
+        "SELECT c.match_id AS match_id, c.rally_idx AS rally, c.exchange AS exchange, c.y_r AS y_r, c.z AS z, \
+         c.in_box AS in_box, c.extrapolated AS extrapolated {MINE} \
+         ORDER BY c.match_id DESC, c.rally_idx, c.seq LIMIT ?2"
+    ))
+    .bind(agent)
+    .bind(limit)
+    .fetch_all(pool)
+    .await?;
+    Ok((total, rows))
+}
+
+/// One point of an agent's rating history.
+#[derive(Debug, Clone, Serialize, FromRow)]
+pub struct RatingPoint {
+    /// Order in which matches finished (server-wide).
+    pub seq: i64,
+    /// The match after which it was computed.
+    pub match_id: i64,
+    /// Glicko-2 rating.
+    pub rating: f64,
+    /// Its deviation.
+    pub deviation: f64,
+    /// Its volatility.
+    pub volatility: f64,
+    /// When.
+    pub created_at: String,
+}
+
+/// An agent's rating history, oldest first.
+pub async fn rating_history(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<RatingPoint>> {
+    sqlx::query_as("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = ? ORDER BY seq")
+        .bind(agent)
+        .fetch_all(pool)
+        .await
+}
+
+/// The drift statistics of one side of a match: (side, agent, JSON).
+pub async fn match_drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<(String, i64, String)>> {
+    sqlx::query_as(
+        "SELECT side, agent_id, drift_json FROM match_drift WHERE match_id = ? ORDER BY side",
+    )
+    .bind(id)
+    .fetch_all(pool)
+    .await
+}

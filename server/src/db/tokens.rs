@@ -1,0 +1,31 @@
+//! Submitter tokens, kept as SHA-256.
+
+use super::*;
+
+/// The SHA-256 of a token, hex.
+pub fn token_sha256(token: &str) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(token.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Stores a new submitter token (its hash only); the id.
+pub async fn insert_token(pool: &SqlitePool, name: &str, token: &str) -> sqlx::Result<i64> {
+    let r = sqlx::query("INSERT INTO tokens (name, token_sha256) VALUES (?, ?)")
+        .bind(name)
+        .bind(token_sha256(token))
+        .execute(pool)
+        .await?;
+    Ok(r.last_insert_rowid())
+}
+
+/// The id of the submitter token `token`, if it is one.
+pub async fn token_id(pool: &SqlitePool, token: &str) -> sqlx::Result<Option<i64>> {
+    let r: Option<(i64,)> = sqlx::query_as("SELECT id FROM tokens WHERE token_sha256 = ?")
+        .bind(token_sha256(token))
+        .fetch_optional(pool)
+        .await?;
+    Ok(r.map(|x| x.0))
+}
