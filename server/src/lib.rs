@@ -258,9 +258,10 @@ pub async fn serve(settings: Settings, on_ready: impl FnOnce(SocketAddr)) -> any
     let state = start(settings).await?;
     let listener = tokio::net::TcpListener::bind(state.settings.addr).await?;
     let addr = listener.local_addr()?;
-    on_ready(addr);
     let shutdown = Arc::new(Notify::new());
+    // A worker name that a live process holds is refused before the server says it is ready.
     let workers = scheduler::Workers::start(state.clone(), shutdown.clone()).await?;
+    on_ready(addr);
     let background = scheduler::spawn_background(state.clone(), shutdown.clone());
     let app = api::router(state.clone());
     axum::serve(listener, app)

@@ -264,10 +264,9 @@ pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
     Ok(ended)
 }
 
-/// After one of its matches finished (inside the transaction that stored it): recomputes the SPRT's
-/// log-likelihood ratio over its finished matches, ends it when the ratio leaves the bounds or
-/// `max_matches` are played, and otherwise queues the next match (sides swapped every match, the
-/// k-th with seed plus k). One match at a time, so the test's course depends only on its seeds. SPRT
+/// After one of its matches finished (inside the transaction that stored it): reads the SPRT and its
+/// finished matches, lets `domain::sprt_step` decide, and writes the decision (and the next match,
+/// if it goes on). One match at a time, so the test's course depends only on its seeds. SPRT
 /// matches keep no replay frames (the replay endpoint re-simulates a rally on request).
 pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<()> {
     let s: Option<Sprt> = sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
@@ -281,53 +280,38 @@ pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sql
         .bind(id)
         .fetch_all(&mut *conn)
         .await?;
-    let scores: Vec<f64> = done
-        .iter()
-        .filter_map(|&(a, pa, pb)| crate::ratings::share_of(s.agent_a, a, pa, pb))
-        .collect();
-    let llr = crate::ratings::sprt_llr(&scores, s.rallies_per_match as f64, s.elo0, s.elo1);
-    let (lower, upper) = crate::ratings::sprt_bounds(s.alpha, s.beta);
-    let n = done.len() as i64;
-    let status = if llr >= upper {
-        SprtStatus::AcceptedH1
-    } else if llr <= lower {
-        SprtStatus::AcceptedH0
-    } else if n >= s.max_matches {
-        SprtStatus::Inconclusive
-    } else {
-        SprtStatus::Running
+    let spec = crate::domain::SprtSpec {
+        agent_a: s.agent_a,
+        agent_b: s.agent_b,
+        elo0: s.elo0,
+        elo1: s.elo1,
+        alpha: s.alpha,
+        beta: s.beta,
+        rallies_per_match: s.rallies_per_match as u32,
+        max_matches: s.max_matches.max(0) as u64,
+        seed: s.seed as u64,
     };
+    let step = crate::domain::sprt_step(&spec, &done);
     sqlx::query("UPDATE sprts SET llr = ?, matches_done = ?, status = ?, finished_at = CASE WHEN ? = 'running' THEN NULL ELSE CURRENT_TIMESTAMP END WHERE id = ?")
-        .bind(llr)
-        .bind(n)
-        .bind(status)
-        .bind(status)
+        .bind(step.llr)
+        .bind(step.matches_done as i64)
+        .bind(step.status)
+        .bind(step.status)
         .bind(id)
         .execute(&mut *conn)
         .await?;
-    if status != SprtStatus::Running {
+    let Some(next) = step.next else {
         return Ok(());
-    }
+    };
     let sql = format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = ?");
     let agent = |id: i64| sqlx::query_as::<_, Agent>(&sql).bind(id);
-    let a = agent(s.agent_a).fetch_one(&mut *conn).await?;
-    let b = agent(s.agent_b).fetch_one(&mut *conn).await?;
-    let (x, y) = if n % 2 == 0 { (&a, &b) } else { (&b, &a) };
+    let a = agent(next.a).fetch_one(&mut *conn).await?;
+    let b = agent(next.b).fetch_one(&mut *conn).await?;
     let origin = Origin {
         tournament: None,
         sprt: Some(id),
         created_by: s.created_by,
     };
-    let seed = (s.seed as u64).wrapping_add(n as u64) & (i64::MAX as u64);
-    queue_match(
-        &mut *conn,
-        x,
-        y,
-        s.rallies_per_match as u32,
-        seed,
-        false,
-        origin,
-    )
-    .await?;
+    queue_match(&mut *conn, &a, &b, next.rallies, next.seed, false, origin).await?;
     Ok(())
 }

@@ -260,24 +260,23 @@ pub async fn store_result(
             .execute(&mut *tx)
             .await?;
     }
-    if agent_a != agent_b {
-        // Glicko-2, online: both sides' last ratings, one game won by the side with more points.
-        let last = |agent: i64| {
-            sqlx::query_as::<_, (f64, f64, f64)>("SELECT rating, deviation, volatility FROM rating_history WHERE agent_id = ? ORDER BY seq DESC LIMIT 1").bind(agent)
-        };
-        let ra = last(agent_a).fetch_optional(&mut *tx).await?;
-        let rb = last(agent_b).fetch_optional(&mut *tx).await?;
-        let (na, nb) = crate::ratings::glicko2_step(ra, rb, r.points[0], r.points[1]);
-        for (agent, g) in [(agent_a, na), (agent_b, nb)] {
-            sqlx::query("INSERT INTO rating_history (match_id, agent_id, rating, deviation, volatility) VALUES (?, ?, ?, ?, ?)")
-                .bind(id)
-                .bind(agent)
-                .bind(g.0)
-                .bind(g.1)
-                .bind(g.2)
-                .execute(&mut *tx)
-                .await?;
-        }
+    // Glicko-2, online: both sides' last ratings in, `domain::rating_update` decides.
+    let last = |agent: i64| {
+        sqlx::query_as::<_, (f64, f64, f64)>("SELECT rating, deviation, volatility FROM rating_history WHERE agent_id = ? ORDER BY seq DESC LIMIT 1").bind(agent)
+    };
+    let prior = [
+        last(agent_a).fetch_optional(&mut *tx).await?,
+        last(agent_b).fetch_optional(&mut *tx).await?,
+    ];
+    for (agent, g) in crate::domain::rating_update([agent_a, agent_b], prior, r.points) {
+        sqlx::query("INSERT INTO rating_history (match_id, agent_id, rating, deviation, volatility) VALUES (?, ?, ?, ?, ?)")
+            .bind(id)
+            .bind(agent)
+            .bind(g.0)
+            .bind(g.1)
+            .bind(g.2)
+            .execute(&mut *tx)
+            .await?;
     }
     for rally in &r.rallies {
         sqlx::query("INSERT INTO rallies (match_id, idx, server, length, end_reason, failing_side, duration) VALUES (?, ?, ?, ?, ?, ?, ?)")

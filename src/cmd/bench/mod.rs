@@ -19,6 +19,8 @@ use sim::{BallWorld, Paddle};
 
 use super::{parse_seconds, CliError};
 
+mod scale;
+
 /// What to measure.
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum Target {
@@ -38,6 +40,9 @@ pub enum Target {
     /// The tournament server from outside: matches per hour, leaderboard requests per second and
     /// p99 latency (next to /healthz) while two matches run, peak memory.
     Server,
+    /// Scale-out on SQLite: the store's claim + store overhead per match, and matches per hour with
+    /// the server's own worker next to 1, 2 and 4 `rally worker` processes on one database file.
+    Scale,
 }
 
 /// Arguments of `rally bench`.
@@ -350,6 +355,41 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
             }
             Ok(())
         }
+        Target::Scale => {
+            let r = scale::scale_bench()?;
+            if args.json {
+                println!("{r}");
+            } else {
+                let o = &r["overhead"];
+                let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+                println!("scale-out on SQLite ({} cores):", r["cores"]);
+                for k in ["claim", "store", "claim_and_store"] {
+                    println!(
+                        "  {k:<16} {:>7.2} ms mean   p50 {:.2} ms   p99 {:.2} ms   ({} matches)",
+                        f(&o[k], "mean_ms"),
+                        f(&o[k], "p50_ms"),
+                        f(&o[k], "p99_ms"),
+                        o["matches"]
+                    );
+                }
+                println!(
+                    "  matches/h ({} matches of {} rallies, scripted built-ins):",
+                    r["throughput_matches"], r["throughput_rallies"]
+                );
+                let serve = f(&r, "serve_one_worker_matches_per_hour");
+                println!("    rally serve, 1 worker        {serve:>8.0}");
+                for p in r["worker_processes"].as_array().into_iter().flatten() {
+                    println!(
+                        "    serve --workers 0 + {} rally worker  {:>8.0}   ({:.2}x)",
+                        p["worker_processes"],
+                        f(p, "matches_per_hour"),
+                        f(p, "vs_serve")
+                    );
+                }
+                println!("  PostgreSQL: {}", r["postgres"].as_str().unwrap_or(""));
+            }
+            Ok(())
+        }
         Target::Server => {
             let r = server_bench(args.seconds, args.clients as usize)?;
             if args.json {
@@ -563,9 +603,9 @@ fn load(addr: &str, path: &str, clients: usize, seconds: f64) -> anyhow::Result<
 }
 
 /// The admin token of the server the benchmark starts.
-const BENCH_TOKEN: &str = "rally-bench-admin";
+pub(crate) const BENCH_TOKEN: &str = "rally-bench-admin";
 
-fn call_json(
+pub(crate) fn call_json(
     addr: &str,
     method: &str,
     path: &str,

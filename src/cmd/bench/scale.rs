@@ -1,0 +1,191 @@
+//! `rally bench scale`: what scale-out costs and gives on the embedded SQLite (DESIGN §12) — the
+//! store's overhead per match (claim, then store a played result under the lease), and matches per
+//! hour with the server's own worker next to 1, 2 and 4 `rally worker` processes on one file.
+//! PostgreSQL is not measured: the store does not speak it yet.
+
+use std::io::BufRead;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context};
+use serde_json::{json, Value};
+
+/// Matches of the overhead measurement.
+const OVERHEAD_MATCHES: usize = 300;
+/// Matches (of `THROUGHPUT_RALLIES` rallies) each throughput configuration plays.
+const THROUGHPUT_MATCHES: usize = 12;
+const THROUGHPUT_RALLIES: u32 = 10;
+
+/// Mean, median and 99th percentile of `xs`, ms.
+fn summary(mut xs: Vec<f64>) -> Value {
+    xs.sort_by(f64::total_cmp);
+    let q = |p: f64| xs[((xs.len() - 1) as f64 * p).round() as usize];
+    json!({"mean_ms": xs.iter().sum::<f64>() / xs.len() as f64, "p50_ms": q(0.5), "p99_ms": q(0.99)})
+}
+
+/// Claim and store `OVERHEAD_MATCHES` one-rally matches in a fresh database (the same played
+/// record each time: the simulation is not what is measured).
+fn overhead(dir: &std::path::Path) -> anyhow::Result<Value> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    runtime.block_on(async {
+        let pool = server::db::open(&dir.join("overhead.db")).await?;
+        server::db::register_builtins(&pool).await?;
+        let all = server::db::agents(&pool).await?;
+        anyhow::ensure!(all.len() >= 2, "fewer than two built-in agents");
+        let spec = agents::matchrun::MatchSpec {
+            model: std::sync::Arc::new(sim::mjcf::parse_str(
+                sim::config::DEFAULT_MODEL_XML,
+                "config/models/upper_body.xml",
+            )?),
+            config: sim::config::ArenaConfig::default(),
+            preset: sim::arena::MYOCHALLENGE,
+            rallies: 1,
+            seed: 1,
+            replay: false,
+        };
+        let scripted = agents::factory::PlayerSpec::scripted("scripted").context("scripted")?;
+        let (record, replay) =
+            agents::matchrun::play_match(&spec, &scripted, &scripted, &mut |_| {})
+                .map_err(|e| anyhow!(e))?;
+        for k in 0..OVERHEAD_MATCHES {
+            let (a, b) = (&all[k % 2], &all[1 - k % 2]);
+            server::db::queue_match(&pool, a, b, 1, k as u64, false, Default::default()).await?;
+        }
+        server::db::workers::register(&pool, "bench", "localhost", std::process::id(), 1, 60_000)
+            .await?;
+        let (mut claims, mut stores) = (Vec::new(), Vec::new());
+        for _ in 0..OVERHEAD_MATCHES {
+            let t0 = Instant::now();
+            let (_, lease) = server::db::workers::claim(&pool, "bench", 60_000)
+                .await?
+                .context("a queued match")?;
+            let t1 = Instant::now();
+            let stored = server::db::store_result(&pool, &lease, &record, &replay).await?;
+            anyhow::ensure!(stored == server::db::Stored::Done, "not stored: {stored:?}");
+            claims.push((t1 - t0).as_secs_f64() * 1e3);
+            stores.push(t1.elapsed().as_secs_f64() * 1e3);
+        }
+        pool.close().await;
+        let total: Vec<f64> = claims.iter().zip(&stores).map(|(c, s)| c + s).collect();
+        Ok(json!({"matches": OVERHEAD_MATCHES, "claim": summary(claims), "store": summary(stores), "claim_and_store": summary(total)}))
+    })
+}
+
+/// A child that is killed when dropped.
+struct Kill(Child);
+
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts this binary with `args`; returns it once its first stdout line is out, and that line.
+fn spawn(args: &[&str]) -> anyhow::Result<(Kill, String)> {
+    let mut child = Command::new(std::env::current_exe()?)
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .env("RALLY_ADMIN_TOKEN", super::BENCH_TOKEN)
+        .stdout(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("starting rally {}", args.join(" ")))?;
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().context("stdout")?).read_line(&mut line)?;
+    Ok((Kill(child), line.trim().to_string()))
+}
+
+/// Matches per hour with `in_server` workers in `rally serve` and `processes` `rally worker`s.
+fn throughput(dir: &std::path::Path, in_server: usize, processes: usize) -> anyhow::Result<f64> {
+    let tag = format!("s{in_server}-w{processes}");
+    let db = dir.join(format!("{tag}.db"));
+    let config = dir.join(format!("{tag}.toml"));
+    let settings = server::DEFAULT_SETTINGS_TOML
+        .lines()
+        .filter(|l| !l.starts_with("builtin_checkpoints"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(&config, format!("{settings}\nbuiltin_checkpoints = \"\"\n"))?;
+    let (config, db) = (config.display().to_string(), db.display().to_string());
+    let workers = in_server.to_string();
+    let (_server, line) = spawn(&[
+        "serve",
+        "--config",
+        &config,
+        "--db",
+        &db,
+        "--addr",
+        "127.0.0.1:0",
+        "--workers",
+        &workers,
+        "--no-continuous",
+    ])?;
+    let addr = line
+        .strip_prefix("listening on http://")
+        .ok_or_else(|| anyhow!("unexpected first line {line:?}"))?
+        .to_string();
+    let mut ids = Vec::new();
+    for k in 0..THROUGHPUT_MATCHES {
+        let (a, b) = [(1, 2), (2, 3), (3, 1)][k % 3];
+        let m = super::call_json(
+            &addr,
+            "POST",
+            "/api/v1/matches",
+            &format!("{{\"a\":{a},\"b\":{b},\"rallies\":{THROUGHPUT_RALLIES},\"seed\":{k}}}"),
+        )?;
+        ids.push(
+            m["id"]
+                .as_i64()
+                .ok_or_else(|| anyhow!("queueing failed: {m}"))?,
+        );
+    }
+    let t0 = Instant::now();
+    let mut children = Vec::new();
+    for w in 0..processes {
+        let name = format!("bench-{w}");
+        children.push(spawn(&["worker", "--config", &config, "--db", &db, "--name", &name])?.0);
+    }
+    loop {
+        let done = super::call_json(&addr, "GET", "/api/v1/matches?status=done&limit=1000", "")?;
+        if done["matches"].as_array().map_or(0, |m| m.len()) >= ids.len() {
+            break;
+        }
+        anyhow::ensure!(
+            t0.elapsed() < Duration::from_secs(900),
+            "{tag}: matches did not finish in 15 minutes"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(ids.len() as f64 / t0.elapsed().as_secs_f64() * 3600.0)
+}
+
+/// The whole benchmark, as JSON.
+pub fn scale_bench() -> anyhow::Result<Value> {
+    let dir = std::env::temp_dir().join(format!("rally-bench-scale-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    let result = (|| -> anyhow::Result<Value> {
+        let overhead = overhead(&dir)?;
+        let serve = throughput(&dir, 1, 0)?;
+        let mut processes = Vec::new();
+        for n in [1, 2, 4] {
+            let per_hour = throughput(&dir, 0, n)?;
+            processes.push(json!({"worker_processes": n, "matches_per_hour": per_hour, "vs_serve": per_hour / serve}));
+        }
+        Ok(json!({
+            "target": "scale",
+            "engine": "sqlite",
+            "cores": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+            "overhead": overhead,
+            "throughput_matches": THROUGHPUT_MATCHES,
+            "throughput_rallies": THROUGHPUT_RALLIES,
+            "serve_one_worker_matches_per_hour": serve,
+            "worker_processes": processes,
+            "postgres": "not measured: the store speaks SQLite only so far",
+        }))
+    })();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
