@@ -202,7 +202,7 @@ pub fn sprt_step(s: &SprtSpec, done: &[(i64, i64, i64)]) -> SprtStep {
         SprtStatus::Running
     };
     let next = (status == SprtStatus::Running).then(|| {
-        let (a, b) = if n % 2 == 0 {
+        let (a, b) = if n.is_multiple_of(2) {
             (s.agent_a, s.agent_b)
         } else {
             (s.agent_b, s.agent_a)
