@@ -82,6 +82,16 @@ pub struct Standing {
     pub agent_id: i64,
     /// Agent name.
     pub agent: String,
+    /// Its matches, wins, draws, losses and points.
+    #[serde(flatten)]
+    pub record: Record,
+    /// Points won / points decided, percent (null before a point).
+    pub points_won_pct: Option<f64>,
+}
+
+/// One agent's record over finished matches (a tournament's standings, `rally batch`'s summary).
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct Record {
     /// Finished matches.
     pub matches: usize,
     /// Matches with more points than the opponent.
@@ -94,8 +104,26 @@ pub struct Standing {
     pub points_for: i64,
     /// Points lost.
     pub points_against: i64,
-    /// Points won / points decided, percent (null before a point).
-    pub points_won_pct: Option<f64>,
+}
+
+impl Record {
+    /// Counts one finished match in which the agent won `won` points and lost `lost`.
+    pub fn add(&mut self, won: i64, lost: i64) {
+        self.matches += 1;
+        self.points_for += won;
+        self.points_against += lost;
+        match won.cmp(&lost) {
+            std::cmp::Ordering::Greater => self.wins += 1,
+            std::cmp::Ordering::Equal => self.draws += 1,
+            std::cmp::Ordering::Less => self.losses += 1,
+        }
+    }
+
+    /// Points won / points decided, percent (none before a point).
+    pub fn points_won_pct(&self) -> Option<f64> {
+        let decided = self.points_for + self.points_against;
+        (decided > 0).then(|| 100.0 * self.points_for as f64 / decided as f64)
+    }
 }
 
 /// A cell of the cross-table: the row agent's record against the column agent.
@@ -142,12 +170,7 @@ pub fn view(kind: Kind, agents: &[(i64, String)], matches: &[Match]) -> View {
             place: 0,
             agent_id: *id,
             agent: name.clone(),
-            matches: 0,
-            wins: 0,
-            draws: 0,
-            losses: 0,
-            points_for: 0,
-            points_against: 0,
+            record: Record::default(),
             points_won_pct: None,
         })
         .collect();
@@ -166,15 +189,7 @@ pub fn view(kind: Kind, agents: &[(i64, String)], matches: &[Match]) -> View {
             continue;
         };
         for (me, them, won, lost) in [(i, j, pa, pb), (j, i, pb, pa)] {
-            let s = &mut standings[me];
-            s.matches += 1;
-            s.points_for += won;
-            s.points_against += lost;
-            match won.cmp(&lost) {
-                std::cmp::Ordering::Greater => s.wins += 1,
-                std::cmp::Ordering::Equal => s.draws += 1,
-                std::cmp::Ordering::Less => s.losses += 1,
-            }
+            standings[me].record.add(won, lost);
             let cell = table[me][them].get_or_insert_with(Cell::default);
             cell.matches += 1;
             cell.points_for += won;
@@ -193,14 +208,13 @@ pub fn view(kind: Kind, agents: &[(i64, String)], matches: &[Match]) -> View {
         "finished"
     };
     for s in &mut standings {
-        let decided = s.points_for + s.points_against;
-        s.points_won_pct = (decided > 0).then(|| 100.0 * s.points_for as f64 / decided as f64);
+        s.points_won_pct = s.record.points_won_pct();
     }
     standings.sort_by(|x, y| {
         y.points_won_pct
             .unwrap_or(-1.0)
             .total_cmp(&x.points_won_pct.unwrap_or(-1.0))
-            .then(y.points_for.cmp(&x.points_for))
+            .then(y.record.points_for.cmp(&x.record.points_for))
             .then(x.agent_id.cmp(&y.agent_id))
     });
     for (k, s) in standings.iter_mut().enumerate() {
@@ -275,7 +289,7 @@ mod tests {
         assert!((v.progress.fraction - 0.8).abs() < 1e-12);
         assert_eq!(v.progress.state, "running");
         // x: 7+4+5 = 16 for, 3+6+5 = 14 against; y: 3+5 = 8 for, 12 against; z: 6 for, 4 against.
-        let x = v.standings.iter().find(|s| s.agent == "x").unwrap();
+        let x = &v.standings.iter().find(|s| s.agent == "x").unwrap().record;
         assert_eq!((x.matches, x.wins, x.draws, x.losses), (3, 1, 1, 1));
         assert_eq!((x.points_for, x.points_against), (16, 14));
         assert_eq!(v.standings[0].agent, "z", "60% beats 53%");

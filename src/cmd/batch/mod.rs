@@ -532,12 +532,7 @@ fn write_csv(
 fn print_summary(order: &[i64], rows: &HashMap<i64, Value>, names: &HashMap<i64, String>) {
     #[derive(Default)]
     struct Line {
-        matches: usize,
-        w: usize,
-        d: usize,
-        l: usize,
-        pf: i64,
-        pa: i64,
+        record: server::tournament::Record,
         rally_sum: f64,
     }
     let mut lines: HashMap<i64, Line> = HashMap::new();
@@ -554,26 +549,12 @@ fn print_summary(order: &[i64], rows: &HashMap<i64, Value>, names: &HashMap<i64,
         let mean = m["mean_rally_length"].as_f64().unwrap_or(0.0);
         for (me, won, lost) in [(a, pa, pb), (b, pb, pa)] {
             let x = lines.entry(me).or_default();
-            x.matches += 1;
-            x.pf += won;
-            x.pa += lost;
+            x.record.add(won, lost);
             x.rally_sum += mean;
-            match won.cmp(&lost) {
-                std::cmp::Ordering::Greater => x.w += 1,
-                std::cmp::Ordering::Equal => x.d += 1,
-                std::cmp::Ordering::Less => x.l += 1,
-            }
         }
     }
     let mut sorted: Vec<(i64, Line)> = lines.into_iter().collect();
-    let pct = |l: &Line| {
-        let n = l.pf + l.pa;
-        if n == 0 {
-            0.0
-        } else {
-            100.0 * l.pf as f64 / n as f64
-        }
-    };
+    let pct = |l: &Line| l.record.points_won_pct().unwrap_or(0.0);
     sorted.sort_by(|x, y| pct(&y.1).total_cmp(&pct(&x.1)).then(x.0.cmp(&y.0)));
     println!();
     println!(
@@ -584,14 +565,14 @@ fn print_summary(order: &[i64], rows: &HashMap<i64, Value>, names: &HashMap<i64,
         println!(
             "{:<24} {:>7} {:>4} {:>4} {:>4} {:>7} {:>7} {:>7.1}% {:>11.2}",
             name_of(names, Some(*id)),
-            l.matches,
-            l.w,
-            l.d,
-            l.l,
-            l.pf,
-            l.pa,
+            l.record.matches,
+            l.record.wins,
+            l.record.draws,
+            l.record.losses,
+            l.record.points_for,
+            l.record.points_against,
             pct(l),
-            l.rally_sum / l.matches.max(1) as f64
+            l.rally_sum / l.record.matches.max(1) as f64
         );
     }
 }
