@@ -197,6 +197,11 @@ pub struct Training {
     /// Mean legal returns per training rally over the last episodes (rally training only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rally_length: Option<f64>,
+    /// How this checkpoint was chosen among the ones its run wrote, when it is not the last (e.g.
+    /// the best on validation seeds that no reported figure uses), and anything else a reader of the
+    /// provenance must know.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
 }
 
 fn single_env() -> String {

@@ -64,6 +64,18 @@ fn the_rally_configuration_is_the_default_but_for_its_environment_and_entropy() 
 }
 
 #[test]
+fn the_rally_finetune_configuration_is_the_rally_one_but_for_the_ball_out_term() {
+    let read = |f: &str| -> TrainConfig {
+        let path = format!("{}/../config/{f}", env!("CARGO_MANIFEST_DIR"));
+        toml::from_str(&std::fs::read_to_string(&path).expect(f)).expect("parses")
+    };
+    let mut c = read("train-rally-finetune.toml");
+    assert_eq!(c.reward.ball_out, 100.0);
+    c.reward.0.ball_out = 0.0;
+    assert_eq!(c, read("train-rally.toml"));
+}
+
+#[test]
 fn a_short_kmac_run_learns_a_signal() {
     // 20 iterations of 64 envs × 16 steps (20 480 control steps), against the untrained policy: the
     // critic's loss falls and the episodes' reward (command tracking and grasp, mostly) rises.

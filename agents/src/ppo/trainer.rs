@@ -796,6 +796,7 @@ impl Trainer {
                 env: self.config.env.name().into(),
                 warm_start: self.progress.warm_start.clone(),
                 rally_length: (self.config.env == TrainEnv::Rally).then_some(last.rally_length),
+                note: None,
             }),
         })
     }

@@ -377,10 +377,10 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
                     r["throughput_matches"], r["throughput_rallies"]
                 );
                 let serve = f(&r, "serve_one_worker_matches_per_hour");
-                println!("    rally serve, 1 worker        {serve:>8.0}");
+                println!("    rally serve, 1 worker of its own       {serve:>8.0}");
                 for p in r["worker_processes"].as_array().into_iter().flatten() {
                     println!(
-                        "    serve --workers 0 + {} rally worker  {:>8.0}   ({:.2}x)",
+                        "    rally serve --workers 0 + {} x worker  {:>8.0}   ({:.2}x)",
                         p["worker_processes"],
                         f(p, "matches_per_hour"),
                         f(p, "vs_serve")

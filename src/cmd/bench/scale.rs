@@ -87,9 +87,10 @@ impl Drop for Kill {
 fn spawn(args: &[&str]) -> anyhow::Result<(Kill, String)> {
     let mut child = Command::new(std::env::current_exe()?)
         .args(args)
-        .env("RUST_LOG", "warn")
+        .env("RUST_LOG", "error")
         .env("RALLY_ADMIN_TOKEN", super::BENCH_TOKEN)
         .stdout(Stdio::piped())
+        .stderr(Stdio::null())
         .spawn()
         .with_context(|| format!("starting rally {}", args.join(" ")))?;
     let mut line = String::new();
