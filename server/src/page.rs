@@ -21,7 +21,7 @@ mod tests {
         let v: serde_json::Value = serde_json::from_str(super::OPENAPI).expect("valid JSON");
         let paths = v["paths"].as_object().expect("paths");
         // Every `.route("…"` of the router, read from its source.
-        let source = include_str!("api.rs");
+        let source = include_str!("api/mod.rs");
         let routes: Vec<&str> = source
             .split(".route(")
             .skip(1)

@@ -1,0 +1,172 @@
+//! `/agents`: the list, one agent, submissions (JSON or multipart, qualified before they are stored).
+
+use super::*;
+
+pub(super) async fn list_agents(State(s): State<AppState>) -> ApiResult<Json<Value>> {
+    Ok(Json(json!({ "agents": db::agents(&s.pool).await? })))
+}
+
+pub(super) async fn get_agent(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let id = parse_id(&id, "id")?;
+    let a = db::agent(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("agent", id))?;
+    let mut v = json!(a);
+    v["drift"] = json!(db::agent_drift_summary(&s.pool, id).await?);
+    v["rally_lengths"] = json!(db::agent_rally_lengths(&s.pool, id)
+        .await?
+        .into_iter()
+        .map(|(length, rallies)| json!({"length": length, "rallies": rallies}))
+        .collect::<Vec<_>>());
+    // A trained checkpoint's provenance and learning curve, as the checkpoint carries them.
+    v["training"] = match db::agent_spec(&s.pool, id).await? {
+        Some((db::AgentKind::Checkpoint, spec)) => {
+            serde_json::from_str::<Value>(&spec).map_or(Value::Null, |c| c["training"].clone())
+        }
+        _ => Value::Null,
+    };
+    Ok(Json(v))
+}
+
+/// Agent names: 1–64 characters of `A–Z a–z 0–9 _ . -`, not starting with `.` or `-`.
+pub fn check_name(name: &str) -> Result<(), String> {
+    if name.is_empty() || name.chars().count() > 64 {
+        return Err("name must have 1 to 64 characters".into());
+    }
+    if !name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || "_.-".contains(c))
+    {
+        return Err("name may contain only letters, digits, '_', '.' and '-'".into());
+    }
+    if name.starts_with(['.', '-']) {
+        return Err("name must not start with '.' or '-'".into());
+    }
+    Ok(())
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SubmitAgent {
+    name: String,
+    checkpoint: Value,
+}
+
+/// Reads a multipart submission: a `name` text field and a `checkpoint` file (the checkpoint JSON).
+pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<SubmitAgent> {
+    let bad_part = |e: MultipartError| ApiError::new(e.status(), "bad_multipart", e.body_text());
+    let (mut name, mut checkpoint) = (None, None);
+    while let Some(field) = form.next_field().await.map_err(bad_part)? {
+        match field.name().unwrap_or("") {
+            "name" => name = Some(field.text().await.map_err(bad_part)?),
+            "checkpoint" => {
+                let bytes = field.bytes().await.map_err(bad_part)?;
+                let v: Value = serde_json::from_slice(&bytes).map_err(|e| ApiError {
+                    field: Some("checkpoint"),
+                    ..ApiError::new(
+                        StatusCode::UNPROCESSABLE_ENTITY,
+                        "invalid_checkpoint",
+                        format!("the checkpoint file is not JSON: {e}"),
+                    )
+                })?;
+                checkpoint = Some(v);
+            }
+            other => {
+                return Err(ApiError::bad(
+                    "multipart",
+                    format!("unknown form field '{other}' (name, checkpoint)"),
+                ))
+            }
+        }
+    }
+    let missing = |f: &'static str| ApiError {
+        field: Some(f),
+        ..ApiError::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "missing_field",
+            format!("the form has no '{f}' field"),
+        )
+    };
+    Ok(SubmitAgent {
+        name: name.ok_or_else(|| missing("name"))?,
+        checkpoint: checkpoint.ok_or_else(|| missing("checkpoint"))?,
+    })
+}
+
+pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> ApiResult<Response> {
+    let caller = check_token(&s, req.headers()).await?;
+    let multipart = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("multipart/form-data"));
+    let body = if multipart {
+        let form = Multipart::from_request(req, &s)
+            .await
+            .map_err(|e| ApiError::new(e.status(), "bad_multipart", e.body_text()))?;
+        read_multipart(form).await?
+    } else {
+        let Json(body) = Json::<SubmitAgent>::from_request(req, &s).await?;
+        body
+    };
+    check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;
+    if db::agents(&s.pool)
+        .await?
+        .iter()
+        .any(|a| a.name == body.name)
+    {
+        return Err(ApiError::name_taken("an agent", &body.name));
+    }
+    let text = body.checkpoint.to_string();
+    let checkpoint =
+        ::agents::checkpoint::Checkpoint::from_json(&text, &s.model).map_err(|e| ApiError {
+            field: Some("checkpoint"),
+            ..ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid_checkpoint",
+                e.to_string(),
+            )
+        })?;
+    charge(&s, caller, Budget::Agents, 1)?;
+    let spec = ::agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
+    let report = crate::qualify(&s, spec).await?.map_err(|e| ApiError {
+        field: Some("checkpoint"),
+        ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
+    })?;
+    let qual = (
+        report.episodes,
+        report.hit_rate.value,
+        report.success_rate.value,
+        report.effort.value,
+    );
+    let id = match db::insert_checkpoint_agent(
+        &s.pool,
+        &body.name,
+        &text,
+        qual,
+        false,
+        match caller {
+            Caller::Admin => None,
+            Caller::Submitter(id) => Some(id),
+        },
+    )
+    .await
+    {
+        Ok(id) => id,
+        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => {
+            return Err(ApiError::name_taken("an agent", &body.name))
+        }
+        Err(e) => return Err(e.into()),
+    };
+    tracing::info!(id, name = %body.name, hit = qual.1, success = qual.2, "agent submitted");
+    s.publish_agent(id);
+    let agent = db::agent(&s.pool, id).await?;
+    Ok((
+        StatusCode::CREATED,
+        Json(json!({"agent": agent, "qualification": report})),
+    )
+        .into_response())
+}

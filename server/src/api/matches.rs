@@ -1,0 +1,273 @@
+//! `/matches`: queueing, the list, one match, cancelling, replays (stored or re-simulated), live feeds.
+
+use super::*;
+
+/// `GET /matches/{id}/live`: a running match as it is played (server-sent events): an event `rally`
+/// per finished rally (its record and frames with body poses, as the replay endpoint gives them),
+/// `lagged` when this viewer fell more than `LIVE_BUFFER` rallies behind (it goes on from the
+/// newest), and `end` when the match is over. 409 if the match is not running. The worker never
+/// waits for a viewer.
+pub(super) async fn live_match(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
+    use axum::response::sse::{Event, KeepAlive, Sse};
+    use tokio::sync::broadcast::error::RecvError;
+    let id = parse_id(&id, "id")?;
+    let m = db::match_row(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("match", id))?;
+    let lookup = || -> ApiResult<_> {
+        Ok(s.live
+            .lock()
+            .map_err(|_| anyhow::anyhow!("live registry poisoned"))?
+            .get(&id)
+            .map(|tx| tx.subscribe()))
+    };
+    let mut rx = lookup()?;
+    if let Some(w) = m
+        .worker
+        .as_deref()
+        .filter(|w| rx.is_none() && m.status == db::MatchStatus::Running && *w != s.worker.as_str())
+    {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_local",
+            format!(
+                "match {id} is played by worker '{w}' in another process: only matches this server's own workers play can be watched live (its replay once done: /replay?match={id})"
+            ),
+        ));
+    }
+    // Claimed a moment ago: its worker registers the feed as it starts; give it a second.
+    let mut tries = 0;
+    while rx.is_none() && m.status == db::MatchStatus::Running && tries < 20 {
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        rx = lookup()?;
+        tries += 1;
+    }
+    let Some(rx) = rx else {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_running",
+            format!(
+                "match {id} is {}: only a running match can be watched live (its replay: /replay?match={id})",
+                m.status
+            ),
+        ));
+    };
+    let stream = futures_util::stream::unfold(Some(rx), |rx| async move {
+        let mut rx = rx?;
+        let event = match rx.recv().await {
+            Ok(msg) => Event::default().event("rally").data(msg.as_str()),
+            Err(RecvError::Lagged(n)) => Event::default().event("lagged").data(n.to_string()),
+            Err(RecvError::Closed) => {
+                return Some((
+                    Ok::<_, std::convert::Infallible>(Event::default().event("end").data("{}")),
+                    None,
+                ))
+            }
+        };
+        Some((Ok(event), Some(rx)))
+    });
+    Ok(Sse::new(stream)
+        .keep_alive(KeepAlive::new().interval(std::time::Duration::from_secs(15)))
+        .into_response())
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct QueueMatch {
+    a: AgentRef,
+    b: AgentRef,
+    rallies: u32,
+    seed: Option<u64>,
+}
+
+pub(super) async fn queue_match(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    body: Result<Json<QueueMatch>, JsonRejection>,
+) -> ApiResult<Response> {
+    let caller = check_token(&s, &headers).await?;
+    let Json(q) = body?;
+    if q.rallies == 0 || q.rallies > s.settings.max_rallies {
+        return Err(ApiError::bad(
+            "rallies",
+            format!("rallies must be between 1 and {}", s.settings.max_rallies),
+        ));
+    }
+    let seed = seed_or_clock(q.seed)?;
+    let a = agent_or_404(&s, &q.a, "a").await?;
+    let b = agent_or_404(&s, &q.b, "b").await?;
+    charge(&s, caller, Budget::Matches, 1)?;
+    let origin = db::Origin {
+        created_by: submitter(caller),
+        ..db::Origin::default()
+    };
+    let id = db::queue_match(&s.pool, &a, &b, q.rallies, seed, true, origin).await?;
+    s.publish_match(id, db::MatchStatus::Queued);
+    s.wake.notify_one();
+    let m = db::match_row(&s.pool, id).await?;
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, format!("/api/v1/matches/{id}"))],
+        Json(json!(m)),
+    )
+        .into_response())
+}
+
+pub(super) async fn list_matches(
+    State(s): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
+) -> ApiResult<Json<Value>> {
+    only_params(&q, &["agent", "status", "limit", "before"])?;
+    let agent = q.get("agent").map(|a| parse_id(a, "agent")).transpose()?;
+    let before = q.get("before").map(|b| parse_id(b, "before")).transpose()?;
+    let status = q
+        .get("status")
+        .map(|st| st.parse::<db::MatchStatus>())
+        .transpose()
+        .map_err(|e| ApiError::bad("status", format!("status {e}")))?;
+    let limit = limit_param(&q, 100, 1000)?;
+    let filter = db::MatchFilter {
+        agent,
+        status,
+        before,
+    };
+    let page = db::matches(&s.pool, filter, limit).await?;
+    // A full page may have more behind it: `?before=` this id gets the next one.
+    let next = (page.len() as i64 == limit)
+        .then(|| page.last().map(|m| m.id))
+        .flatten();
+    Ok(Json(json!({ "matches": page, "next_before": next })))
+}
+
+pub(super) async fn get_match(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let id = parse_id(&id, "id")?;
+    let m = db::match_row(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("match", id))?;
+    let rallies = db::rallies(&s.pool, id).await?;
+    let drift: Option<Value> = db::drift(&s.pool, id)
+        .await?
+        .and_then(|d| serde_json::from_str(&d).ok());
+    let by_side: Vec<Value> = db::match_drift(&s.pool, id)
+        .await?
+        .into_iter()
+        .map(|(side, agent, d)| {
+            json!({"side": side, "agent_id": agent, "drift": serde_json::from_str::<Value>(&d).unwrap_or(Value::Null)})
+        })
+        .collect();
+    let mut v = json!(m);
+    v["rally_log"] = json!(rallies);
+    v["drift"] = drift.unwrap_or(Value::Null);
+    v["drift_by_side"] = json!(by_side);
+    Ok(Json(v))
+}
+
+pub(super) async fn cancel_match(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let caller = check_token(&s, &headers).await?;
+    let id = parse_id(&id, "id")?;
+    let m = db::match_row(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("match", id))?;
+    may_cancel(caller, m.created_by, &format!("match {id}"))?;
+    if !db::cancel(&s.pool, id).await? {
+        return Err(ApiError::not_cancellable(format!(
+            "match {id} is {} and can no longer be cancelled",
+            m.status
+        )));
+    }
+    s.publish_match(id, db::MatchStatus::Cancelled);
+    Ok(Json(json!(db::match_row(&s.pool, id).await?)))
+}
+
+pub(super) async fn get_replay(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    Query(q): Query<HashMap<String, String>>,
+) -> ApiResult<Response> {
+    let id = parse_id(&id, "id")?;
+    let m = db::match_row(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("match", id))?;
+    let rally = match q.get("rally") {
+        None => 0,
+        Some(r) => r
+            .parse::<i64>()
+            .ok()
+            .filter(|&r| r >= 0)
+            .ok_or_else(|| ApiError::bad("rally", format!("'{r}' is not a rally index")))?,
+    };
+    if m.status != db::MatchStatus::Done {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_done",
+            format!("match {id} is {}; replays exist once it is done", m.status),
+        ));
+    }
+    if rally >= m.rallies {
+        return Err(ApiError::bad(
+            "rally",
+            format!("match {id} has rallies 0 to {}", m.rallies - 1),
+        ));
+    }
+    let (frames, resimulated) = if m.keep_replay {
+        let frames = db::replay(&s.pool, id, rally).await?.ok_or_else(|| {
+            ApiError::new(
+                StatusCode::NOT_FOUND,
+                "not_found",
+                "no replay stored for that rally",
+            )
+        })?;
+        (frames, false)
+    } else {
+        // Continuous-mode and SPRT matches keep no frames: rallies are independent and deterministic,
+        // so the rally is re-simulated (bit-identical to the one played), a few at a time.
+        let spec_of = |agent: i64| {
+            let s = s.clone();
+            async move {
+                db::agent_spec(&s.pool, agent).await?.ok_or_else(|| {
+                    ApiError::new(
+                        StatusCode::CONFLICT,
+                        "not_replayable",
+                        format!("agent {agent} no longer exists"),
+                    )
+                })
+            }
+        };
+        let agents = [spec_of(m.agent_a).await?, spec_of(m.agent_b).await?];
+        let _turn = s
+            .resim
+            .acquire()
+            .await
+            .map_err(|e| anyhow::anyhow!("re-simulation queue closed: {e}"))?;
+        let st = s.clone();
+        let frames = tokio::task::spawn_blocking(move || {
+            crate::scheduler::resimulate_rally(&st, &m, agents, rally as u32)
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("re-simulation panicked: {e}"))?
+        .map_err(|e| ApiError::new(StatusCode::CONFLICT, "not_replayable", e))?;
+        let json = serde_json::to_string(&frames).map_err(|e| anyhow::anyhow!("{e}"))?;
+        (json, true)
+    };
+    let model = s.model.clone();
+    let frames =
+        tokio::task::spawn_blocking(move || crate::replay::with_body_poses(&model, &frames))
+            .await
+            .map_err(|e| anyhow::anyhow!("replay poses panicked: {e}"))?
+            .map_err(|e| anyhow::anyhow!("stored replay unreadable: {e}"))?;
+    let body = format!(
+        "{{\"match\":{id},\"rally\":{rally},\"hz\":{},\"resimulated\":{resimulated},\"frames\":{frames}}}",
+        ::agents::matchrun::REPLAY_HZ
+    );
+    Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())
+}
