@@ -76,6 +76,28 @@ fn the_rally_finetune_configuration_is_the_rally_one_but_for_the_ball_out_term()
 }
 
 #[test]
+fn a_sigma_cap_holds_the_policy_noise_under_its_schedule() {
+    // The cap's schedule: linear from the first value to the second over max_std_steps, then flat.
+    let mut c = small(8, 4, 100);
+    c.ppo.max_std = Some([0.4, 0.2]);
+    c.ppo.max_std_steps = 1000;
+    assert_eq!(c.ppo.std_cap(0), Some(0.4));
+    assert!((c.ppo.std_cap(500).unwrap() - 0.3).abs() < 1e-12);
+    assert_eq!(c.ppo.std_cap(5000), Some(0.2));
+    assert_eq!(TrainConfig::default().ppo.std_cap(0), None);
+    // Training under it: σ starts at 0.5 and is at most the cap after every update.
+    let mut t = Trainer::new(model(), Method::Kmac, c, 5).unwrap();
+    assert!(t.net.std().unwrap().iter().all(|s| (s - 0.5).abs() < 1e-6));
+    // (An iteration's updates use the cap at the env steps counted before it.)
+    for _ in 0..3 {
+        let cap = t.config.ppo.std_cap(t.progress.env_steps).unwrap() as f32;
+        t.iterate().unwrap();
+        let std = t.net.std().unwrap();
+        assert!(std.iter().all(|s| *s <= cap * 1.0001), "{std:?} over {cap}");
+    }
+}
+
+#[test]
 fn a_short_kmac_run_learns_a_signal() {
     // 20 iterations of 64 envs × 16 steps (20 480 control steps), against the untrained policy: the
     // critic's loss falls and the episodes' reward (command tracking and grasp, mostly) rises.

@@ -141,10 +141,13 @@ pub struct PpoConfig {
     /// makes the value loss dwarf the policy's gradient under one joint norm clip).
     pub reward_scale: f64,
     /// Upper bound on the policy's σ (ours; rsl_rl has none): `[from, to]`, lowered linearly from
-    /// `from` to `to` over the run's first `max_std_steps` env steps and held at `to` after. The
-    /// action noise is what a stroke's precision is lost to (a trained `kmac-rally` played at 0.75 of
-    /// its σ returned 60.5% of rally serves against 52% at its σ, 200 episodes, seed 9191), and PPO
-    /// without an entropy bonus lowers σ only slowly. `None`: unbounded.
+    /// `from` to `to` over the run's first `max_std_steps` env steps and held at `to` after; applied
+    /// after every optimiser step. `None` (the default and every shipped configuration): unbounded.
+    /// Tried on the rally fine-tuning and not kept: a trained `kmac-rally` played at 0.75 of its σ
+    /// returned 60.5% of rally serves against 52% at its σ (200 episodes, seed 9191), but training
+    /// under a cap falling 0.9 → 0.3 over 3 M steps lowered the training rally length (0.6 → 0.5 by
+    /// 2 M steps): the policy had learnt to play through its noise, and the adaptive learning rate
+    /// shrinks as σ does.
     pub max_std: Option<[f64; 2]>,
     /// Env steps over which `max_std` falls from its first value to its second.
     pub max_std_steps: u64,
