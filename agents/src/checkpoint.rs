@@ -294,13 +294,31 @@ fn load_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError>
             "the graph's output '{name}' is no input, initializer or node's output"
         )));
     }
-    let plan = onnx
-        .model_for_proto_model(&proto)
-        .and_then(|m| m.with_input_fact(0, f32::fact([1, inputs]).into()))
-        .and_then(|m| m.into_optimized())
-        .and_then(|m| m.into_runnable())
-        .map_err(|e| refuse(e.to_string()))?;
-    Ok(plan)
+    // tract's own checks are not all errors: a model that passes ours may still make it panic
+    // (the fuzz target found two), so its work is contained here and a panic refuses the model.
+    let built = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let m = onnx.model_for_proto_model(&proto)?;
+        let n = m.input_outlets()?.len();
+        if n != 1 {
+            return Err(TractError::msg(format!("it takes {n} inputs, not one")));
+        }
+        m.with_input_fact(0, f32::fact([1, inputs]).into())?
+            .into_optimized()?
+            .into_runnable()
+    }));
+    match built {
+        Ok(plan) => plan.map_err(|e| refuse(e.to_string())),
+        Err(panic) => {
+            let why = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "no message".into());
+            Err(refuse(format!(
+                "tract could not read it (it panicked: {why})"
+            )))
+        }
+    }
 }
 
 /// A graph output (of `g` or of a subgraph in one of its nodes' attributes) that names no input,

@@ -135,3 +135,21 @@ fn an_onnx_graph_whose_output_names_nothing_is_refused_not_a_panic() {
         "{e}"
     );
 }
+
+#[test]
+fn an_onnx_model_without_an_input_is_refused_not_a_panic() {
+    // Found by the checkpoint_onnx fuzz target once the case above was refused: tract-core 0.23
+    // indexed the inputs of a model that has none.
+    let bytes = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/onnx_no_input.onnx"
+    ))
+    .unwrap();
+    let m = model();
+    let blocks = agents::observation::ObsBlock::ALL.to_vec();
+    let n = agents::observation::Observer::new(&m, blocks.clone(), 0).size();
+    let text = serde_json::to_string(&onnx_checkpoint(blocks, n, &bytes)).unwrap();
+    let e = Checkpoint::from_json(&text, &m).unwrap_err();
+    assert_eq!(e.field, "onnx.model_base64", "{e}");
+    assert!(e.message.contains("it takes 0 inputs, not one"), "{e}");
+}
