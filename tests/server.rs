@@ -1002,22 +1002,7 @@ fn sigterm_shuts_down_gracefully_and_loses_nothing() {
     assert_eq!(code, 202);
     let id = m["id"].as_i64().unwrap();
     wait_for(&srv.addr, id, "running", Duration::from_secs(30));
-    let term = Command::new("kill")
-        .args(["-TERM", &srv.child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(term.success());
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(s) = srv.child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(120),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = terminate(&mut srv);
     assert!(status.success(), "exit status {status:?}");
     drop(srv);
     // The running match was finished before exit (or, at worst, is re-queued): never lost.

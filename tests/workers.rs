@@ -118,22 +118,7 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
     w1.child.wait().unwrap();
     // SIGTERM w2 in the middle of a match: it finishes and stores it, then exits 0.
     let stopped = wait_holding(a, "w2");
-    let term = Command::new("kill")
-        .args(["-TERM", &w2.child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(term.success());
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(s) = w2.child.try_wait().unwrap() {
-            break s;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(120),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = terminate(&mut w2);
     assert!(status.success(), "exit status {status:?}");
     let (_, m) = call(a, "GET", &format!("/api/v1/matches/{stopped}"), None, None);
     assert_eq!(

@@ -114,21 +114,24 @@ fn mismatched_or_broken_onnx_models_are_refused() {
     assert!(c.validate(&m).unwrap_err().message.contains("13 actions"));
 }
 
-#[test]
-fn an_onnx_graph_whose_output_names_nothing_is_refused_not_a_panic() {
-    // Found by the checkpoint_onnx fuzz target in CI: tract-onnx 0.23 panicked ("no entry found for
-    // key") on a graph output that no input, initializer or node produces.
-    let bytes = std::fs::read(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/fixtures/onnx_output_names_nothing.onnx"
-    ))
-    .unwrap();
+/// The reader's refusal of fixture `file`, a model the checkpoint_onnx fuzz target found.
+fn refused(file: &str) -> agents::checkpoint::CheckpointError {
+    let path = format!("{}/tests/fixtures/{file}", env!("CARGO_MANIFEST_DIR"));
+    let bytes = std::fs::read(path).unwrap();
     let m = model();
     let blocks = agents::observation::ObsBlock::ALL.to_vec();
     let n = agents::observation::Observer::new(&m, blocks.clone(), 0).size();
     let text = serde_json::to_string(&onnx_checkpoint(blocks, n, &bytes)).unwrap();
     let e = Checkpoint::from_json(&text, &m).unwrap_err();
     assert_eq!(e.field, "onnx.model_base64", "{e}");
+    e
+}
+
+#[test]
+fn an_onnx_graph_whose_output_names_nothing_is_refused_not_a_panic() {
+    // Found by the checkpoint_onnx fuzz target in CI: tract-onnx 0.23 panicked ("no entry found for
+    // key") on a graph output that no input, initializer or node produces.
+    let e = refused("onnx_output_names_nothing.onnx");
     assert!(
         e.message
             .contains("is no input, initializer or node's output"),
@@ -140,16 +143,6 @@ fn an_onnx_graph_whose_output_names_nothing_is_refused_not_a_panic() {
 fn an_onnx_model_without_an_input_is_refused_not_a_panic() {
     // Found by the checkpoint_onnx fuzz target once the case above was refused: tract-core 0.23
     // indexed the inputs of a model that has none.
-    let bytes = std::fs::read(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/fixtures/onnx_no_input.onnx"
-    ))
-    .unwrap();
-    let m = model();
-    let blocks = agents::observation::ObsBlock::ALL.to_vec();
-    let n = agents::observation::Observer::new(&m, blocks.clone(), 0).size();
-    let text = serde_json::to_string(&onnx_checkpoint(blocks, n, &bytes)).unwrap();
-    let e = Checkpoint::from_json(&text, &m).unwrap_err();
-    assert_eq!(e.field, "onnx.model_base64", "{e}");
+    let e = refused("onnx_no_input.onnx");
     assert!(e.message.contains("it takes 0 inputs, not one"), "{e}");
 }

@@ -248,3 +248,23 @@ pub fn subscribe(addr: &str, path: &str) -> (BufReader<TcpStream>, String) {
     assert!(head.starts_with("HTTP/1.1 200"), "{path}: {head}");
     (reader, head)
 }
+
+/// Sends SIGTERM to `p` and waits (at most two minutes) for it to exit; its exit status.
+pub fn terminate(p: &mut Server) -> std::process::ExitStatus {
+    let term = Command::new("kill")
+        .args(["-TERM", &p.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(term.success());
+    let t0 = Instant::now();
+    loop {
+        if let Some(s) = p.child.try_wait().unwrap() {
+            return s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "no exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
