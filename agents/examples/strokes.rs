@@ -79,14 +79,7 @@ fn main() {
                 break;
             }
         }
-        let end = if env.success {
-            "SUCCESS"
-        } else {
-            env.referee
-                .end()
-                .map(|e| e.reason.name())
-                .unwrap_or("TIME_LIMIT")
-        };
+        let end = agents::eval::end_name(&env);
         if let Some(r) = row {
             println!("{end},{r}");
         }

@@ -123,6 +123,18 @@ pub struct EvalReport {
     pub ends: Vec<(String, usize)>,
 }
 
+/// How a finished single-serve episode ended: SUCCESS, the referee's reason, or TIME_LIMIT.
+pub fn end_name(env: &SingleServe) -> &'static str {
+    if env.success {
+        "SUCCESS"
+    } else {
+        env.referee
+            .end()
+            .map(|e| e.reason.name())
+            .unwrap_or("TIME_LIMIT")
+    }
+}
+
 /// Plays one single-serve episode with `player`.
 pub fn play_episode(
     env: &mut SingleServe,
@@ -157,14 +169,7 @@ pub fn play_episode(
             break;
         }
     }
-    let end = if env.success {
-        "SUCCESS"
-    } else {
-        env.referee
-            .end()
-            .map(|e| e.reason.name())
-            .unwrap_or("TIME_LIMIT")
-    };
+    let end = end_name(env);
     let steps = steps.max(1) as f64;
     EpisodeResult {
         hit: env.hit,
