@@ -5,7 +5,6 @@
 
 use std::sync::Arc;
 
-use rayon::prelude::*;
 use serde::Serialize;
 use sim::arena::Preset;
 use sim::config::ArenaConfig;
@@ -217,33 +216,22 @@ pub fn evaluate(
     // One environment and one player per worker (an ONNX player prepares its network once), the
     // workers taking the next episode index as they finish one; each episode reseeds the player, so
     // results do not depend on which worker played it.
-    let workers = rayon::current_num_threads().clamp(1, episodes.max(1));
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let slots: Vec<std::sync::Mutex<Option<EpisodeResult>>> =
-        (0..episodes).map(|_| std::sync::Mutex::new(None)).collect();
-    (0..workers).into_par_iter().for_each(|_| {
-        let mut env = SingleServe::new(model.clone(), config, preset).expect("checked above");
-        let mut player = spec.build(&model, &preset, 0).expect("checked above");
-        loop {
-            let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            if i >= episodes {
-                break;
-            }
+    let results: Vec<EpisodeResult> = crate::seeds::par_indexed(
+        episodes,
+        || {
+            (
+                SingleServe::new(model.clone(), config, preset).expect("checked above"),
+                spec.build(&model, &preset, 0).expect("checked above"),
+            )
+        },
+        |(env, player), i| {
             let (serve_seed, agent_seed) = episode_seeds(seed, i);
             player.reseed(agent_seed);
-            let r = play_episode(&mut env, player.as_mut(), kind, serve_seed);
-            *slots[i].lock().expect("no worker panics holding it") = Some(r);
+            let r = play_episode(env, player.as_mut(), kind, serve_seed);
             progress();
-        }
-    });
-    let results: Vec<EpisodeResult> = slots
-        .into_iter()
-        .map(|m| {
-            m.into_inner()
-                .expect("no worker panicked")
-                .expect("every episode played")
-        })
-        .collect();
+            r
+        },
+    );
     let hits = results.iter().filter(|r| r.hit).count();
     let wins = results.iter().filter(|r| r.success).count();
     let mut ends: Vec<(String, usize)> = Vec::new();

@@ -346,6 +346,38 @@ pub fn play_match_with(
     Ok((record, replay))
 }
 
+/// The rally records of the match `spec` describes between `a` (side A) and `b`, without replay
+/// frames, played in parallel: one arena and one pair of players per rayon worker, each taking the
+/// next rally index. Rallies are independent, so record k equals rally k of [`play_match`] whatever
+/// the number of threads (a test checks it); no drift statistics, no points (training's
+/// validation uses it).
+pub fn play_rallies(
+    spec: &MatchSpec,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+) -> Result<Vec<RallyRecord>, String> {
+    let build = || -> Result<([Box<dyn Player>; 2], Rally), String> {
+        Ok((
+            [
+                a.build(&spec.model, &spec.preset, 0)?,
+                b.build(&spec.model, &spec.preset, 0)?,
+            ],
+            Rally::new(spec.model.clone(), &spec.config, spec.preset)?,
+        ))
+    };
+    // Fail early, once, on anything wrong with the players or the arena.
+    build()?;
+    let spec = MatchSpec {
+        replay: false,
+        ..spec.clone()
+    };
+    Ok(crate::seeds::par_indexed(
+        spec.rallies as usize,
+        || build().expect("checked above"),
+        |(players, rally), k| play_rally(rally, players, &spec, k as u32).0,
+    ))
+}
+
 /// Plays rally `k` of a match on `rally` (reset first: every rally starts from the ready pose with its
 /// own serve and agent seeds, so it depends on nothing but the match seed and `k`); its record, its
 /// replay frames (empty unless `spec.replay`) and the side that failed.

@@ -131,3 +131,28 @@ fn any_rally_replays_alone_bit_for_bit() {
     }
     assert!(agents::matchrun::replay_rally(&quiet, &a, &b, 5).is_err());
 }
+
+#[test]
+fn rallies_played_in_parallel_are_the_match_rallies() {
+    // Training's validation plays a match's rallies on every core; each must be that match's rally.
+    let (a, b) = (
+        PlayerSpec::scripted("scripted").unwrap(),
+        PlayerSpec::scripted("scripted-drive").unwrap(),
+    );
+    let s = spec(5, 11, false);
+    let (whole, _) = play_match(&s, &a, &b, &mut |_| {}).unwrap();
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let parallel = pool
+            .install(|| agents::matchrun::play_rallies(&s, &a, &b))
+            .unwrap();
+        assert_eq!(
+            serde_json::to_string(&parallel).unwrap(),
+            serde_json::to_string(&whole.rallies).unwrap(),
+            "{threads} threads"
+        );
+    }
+}

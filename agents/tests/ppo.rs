@@ -208,3 +208,16 @@ fn every_method_trains_and_exports_a_checkpoint_that_plays() {
         agents::eval::evaluate(&e, &spec, &|| {}).unwrap();
     }
 }
+
+#[test]
+fn the_rally_batch_configuration_is_the_finetune_one_but_for_its_batch_and_validation() {
+    let read = |f: &str| -> TrainConfig {
+        let path = format!("{}/../config/{f}", env!("CARGO_MANIFEST_DIR"));
+        toml::from_str(&std::fs::read_to_string(&path).expect(f)).expect("parses")
+    };
+    let mut c = read("train-rally-batch.toml");
+    assert_eq!((c.ppo.envs, c.validation.every), (256, 10));
+    c.ppo.envs = 64;
+    c.validation.every = 0;
+    assert_eq!(c, read("train-rally-finetune.toml"));
+}

@@ -71,3 +71,81 @@ fn the_serve_box_term_is_paid_once_the_policy_returns_balls() {
     assert!(warm_dual > cold_dual, "{warm_dual} vs {cold_dual}");
     assert!(row.rally_length > 0.0 && (row.dual - warm_dual).abs() < 1e-12);
 }
+
+fn weight_bits(t: &Trainer) -> Vec<u32> {
+    t.net
+        .named()
+        .iter()
+        .flat_map(|(_, x)| {
+            x.flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap()
+                .into_iter()
+                .map(f32::to_bits)
+        })
+        .collect()
+}
+
+#[test]
+fn validation_scores_the_policy_and_leaves_the_run_unchanged() {
+    // Two runs warm-started from the committed rally run, one validated after every iteration: the
+    // same weights after three iterations. The validation plays the policy as a checkpoint would
+    // (self-play rallies on the validation seed): the warm policy returns balls, the untrained one
+    // does not, and its score is the mean rally length those rallies give.
+    let mut cfg = rally_config(4, 16, 100);
+    cfg.validation.every = 1;
+    cfg.validation.episodes = 10;
+    let m = model();
+    let run = RunDir::open(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../runs/kmac-rally"
+    )))
+    .unwrap();
+    let warm = |seed| {
+        let mut t = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), seed).unwrap();
+        run.warm_start(&mut t).unwrap();
+        t
+    };
+    let (mut plain, mut validated) = (warm(9), warm(9));
+    for _ in 0..3 {
+        plain.iterate().unwrap();
+        validated.iterate().unwrap();
+        let v = validated.validate().unwrap();
+        validated.progress.validations.push(v);
+    }
+    assert_eq!(weight_bits(&plain), weight_bits(&validated));
+    let scores: Vec<f64> = validated
+        .progress
+        .validations
+        .iter()
+        .map(|v| v.score)
+        .collect();
+    eprintln!("validation mean rally after iterations 1-3: {scores:?}");
+    assert!(scores.iter().all(|&s| s > 0.0), "{scores:?}");
+    let best = validated.progress.best_validation().unwrap();
+    assert!(scores.iter().all(|&s| s <= best.score));
+    assert_eq!(
+        best.iteration,
+        1 + scores.iter().position(|&s| s == best.score).unwrap() as u64
+    );
+    // The score is the mean rally of the validation's self-play rallies, checkpoint against itself.
+    let ck = validated.checkpoint("v", "", "").unwrap();
+    let player = agents::factory::PlayerSpec::Checkpoint(Arc::new(ck));
+    let spec = agents::matchrun::MatchSpec {
+        model: m.clone(),
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        rallies: 10,
+        seed: cfg.validation.seed,
+        replay: false,
+    };
+    let lengths: u32 = agents::matchrun::play_rallies(&spec, &player, &player)
+        .unwrap()
+        .iter()
+        .map(|r| r.length)
+        .sum();
+    assert_eq!(lengths as f64 / 10.0, scores[2]);
+    let cold = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 9).unwrap();
+    assert_eq!(cold.validate().unwrap().score, 0.0);
+}

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use agents::ppo::store::{write_atomic, RunDir};
-use agents::ppo::trainer::{CurveRow, Trainer};
+use agents::ppo::trainer::{CurveRow, Trainer, ValidationPoint};
 use agents::ppo::{Method, TrainConfig, TrainEnv, TrainServe};
 use anyhow::anyhow;
 use clap::Args;
@@ -22,7 +22,9 @@ use super::CliError;
     rally train --method kmac --env rally --init runs/kmac --steps 4000000 --seed 2 --out runs/kmac-rally\n  \
     rally plot runs/kmac runs/muscle --out curves.png\n\n\
     Writes OUT/checkpoint.json (the agents' checkpoint format: rally eval OUT/checkpoint.json),\n\
-    OUT/curve.csv, OUT/curve.png and OUT/resume/ (what --resume reads).")]
+    OUT/curve.csv, OUT/curve.png and OUT/resume/ (what --resume reads). With [validation] every = K\n\
+    in the configuration, every K iterations the policy plays held-out episodes (self-play rallies in\n\
+    the rally environment): OUT/validation.csv, and OUT/best.json is the best so far.")]
 pub struct TrainArgs {
     /// The method: kmac (Diff-Muscle), muscle (Muscle-PPO), muscle-pd or dynsyn.
     #[arg(long, value_parser = parse_method)]
@@ -155,6 +157,69 @@ fn save(
     Ok(())
 }
 
+/// What a validation measured, in words.
+fn validation_words(env: TrainEnv, v: &ValidationPoint) -> String {
+    match env {
+        TrainEnv::Rally => format!(
+            "mean rally {:.3} (longest {}) over {} self-play rallies",
+            v.score, v.longest, v.episodes
+        ),
+        TrainEnv::Single => format!(
+            "success {:.1}% over {} episodes",
+            100.0 * v.score,
+            v.episodes
+        ),
+    }
+}
+
+/// Validates the policy (`[validation]` of the configuration), records it in the run's
+/// `validation.csv` and, when it is the best so far, writes it to `best.json` with a note that says
+/// how it was chosen.
+fn validate(
+    dir: &RunDir,
+    t: &mut Trainer,
+    name: &str,
+    command: &str,
+    commit: &str,
+    bar: &ProgressBar,
+) -> Result<(), CliError> {
+    let point = t.validate().map_err(|e| anyhow!(e))?;
+    let best_before = t.progress.best_validation().map(|b| b.score);
+    t.progress.validations.push(point);
+    let words = validation_words(t.config.env, &point);
+    if best_before.is_none_or(|b| point.score > b) {
+        let mut ck = t
+            .checkpoint(name, command, commit)
+            .map_err(|e| anyhow!(e))?;
+        if let Some(tr) = ck.training.as_mut() {
+            tr.note = Some(format!(
+                "The best of the run's validations so far: iteration {} ({} steps), {words}, validation seed {} (the same serves at every validation; report figures on other seeds).",
+                point.iteration, point.env_steps, t.config.validation.seed
+            ));
+        }
+        let json = serde_json::to_vec(&ck).map_err(anyhow::Error::from)?;
+        write_atomic(&dir.best_path(), &json).map_err(|e| anyhow!(e))?;
+    }
+    dir.write_validations(&t.progress.validations)
+        .map_err(|e| anyhow!(e))?;
+    let line = format!(
+        "validation at iteration {} ({} steps): {words}{}",
+        point.iteration,
+        point.env_steps,
+        if best_before.is_none_or(|b| point.score > b) {
+            "  (best so far: best.json)"
+        } else {
+            ""
+        }
+    );
+    if bar.is_hidden() {
+        eprintln!("{line}");
+    } else {
+        bar.println(line);
+    }
+    Ok(())
+}
+
 /// Runs `rally train`.
 pub fn run(args: &TrainArgs) -> Result<(), CliError> {
     let model = super::default_model()?;
@@ -250,6 +315,10 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         let rate = (row.env_steps - first_steps) as f64 / started.elapsed().as_secs_f64();
         bar.set_position(row.env_steps.min(args.steps));
         bar.set_message(status_line(&row, rate, trainer.config.env));
+        let v_every = trainer.config.validation.every as u64;
+        if v_every > 0 && row.iteration.is_multiple_of(v_every) {
+            validate(&dir, &mut trainer, &name, &command, &commit, &bar)?;
+        }
         let boundary = row.iteration.is_multiple_of(every);
         if boundary {
             save(&dir, &trainer, &name, &command, &commit, true)?;
@@ -287,6 +356,15 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         100.0 * last.success_rate
     );
     println!("checkpoint: {}", dir.checkpoint_path().display());
+    if let Some(b) = trainer.progress.best_validation() {
+        println!(
+            "best on validation: iteration {} ({} steps), {}: {}",
+            b.iteration,
+            b.env_steps,
+            validation_words(trainer.config.env, b),
+            dir.best_path().display()
+        );
+    }
     if !at_boundary {
         println!(
             "(the resumable state is from iteration {}; --resume continues from there)",

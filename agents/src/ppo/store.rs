@@ -2,6 +2,8 @@
 //!
 //! - `checkpoint.json` — the policy in the agents' checkpoint format, with its provenance;
 //! - `curve.csv` — one row per iteration (the learning curve);
+//! - `validation.csv` and `best.json` — the held-out validations and the best checkpoint, when the
+//!   configuration asks for them (`[validation]`);
 //! - `resume/` — what `--resume` needs: `state.json` (configuration, counters, statistics,
 //!   normaliser, Adam's step count and learning rate) and `tensors.safetensors` (actor, critic,
 //!   log σ and Adam's moments).
@@ -22,7 +24,7 @@ use sim::model::Model;
 
 use super::adam::Adam;
 use super::normalizer::RunningNormalizer;
-use super::trainer::{CurveRow, Progress, Trainer};
+use super::trainer::{CurveRow, Progress, Trainer, ValidationPoint};
 use super::{Method, TrainConfig};
 
 /// Version of the resumable state's layout.
@@ -86,6 +88,23 @@ impl RunDir {
     /// `curve.csv`.
     pub fn curve_path(&self) -> PathBuf {
         self.dir.join("curve.csv")
+    }
+
+    /// `best.json`: the checkpoint of the best validation so far.
+    pub fn best_path(&self) -> PathBuf {
+        self.dir.join("best.json")
+    }
+
+    /// Rewrites `validation.csv` from the run's validations.
+    pub fn write_validations(&self, points: &[ValidationPoint]) -> Result<(), String> {
+        let mut out = String::from("iteration,env_steps,score,episodes,longest\n");
+        for v in points {
+            out.push_str(&format!(
+                "{},{},{:.5},{},{}\n",
+                v.iteration, v.env_steps, v.score, v.episodes, v.longest
+            ));
+        }
+        write_atomic(&self.dir.join("validation.csv"), out.as_bytes())
     }
 
     fn resume_dir(&self) -> PathBuf {

@@ -18,14 +18,13 @@ use serde::{Deserialize, Serialize};
 use sim::config::ArenaConfig;
 use sim::model::Model;
 use sim::rng::Rng;
-use sim::serve::ServeKind;
 
 use super::adam::{clip_grad_norm, Adam};
 use super::gae::{gae, normalise, StepEnd};
 use super::loss;
 use super::normalizer::RunningNormalizer;
 use super::policy::ActorCritic;
-use super::{stream_seed, Method, Schedule, TrainConfig, TrainEnv, TrainServe};
+use super::{stream_seed, Method, Schedule, TrainConfig, TrainEnv};
 use crate::checkpoint::{Checkpoint, ObservationSpec, Training, TrainingPoint, FORMAT, VERSION};
 use crate::controller::ControllerSpec;
 use crate::env::{Env, EpisodeEnd, RallyEnv};
@@ -136,6 +135,37 @@ pub struct Progress {
     /// The run directory this run's weights started from (a warm start), if any.
     #[serde(default)]
     pub warm_start: Option<String>,
+    /// Every validation so far (see [`super::ValidationConfig`]).
+    #[serde(default)]
+    pub validations: Vec<ValidationPoint>,
+}
+
+impl Progress {
+    /// The best validation so far (the earliest of equals).
+    pub fn best_validation(&self) -> Option<&ValidationPoint> {
+        self.validations
+            .iter()
+            .fold(None, |best: Option<&ValidationPoint>, v| match best {
+                Some(b) if b.score >= v.score => Some(b),
+                _ => Some(v),
+            })
+    }
+}
+
+/// One validation of the policy on held-out episodes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ValidationPoint {
+    /// Iterations done when it was taken.
+    pub iteration: u64,
+    /// Env steps done then.
+    pub env_steps: u64,
+    /// Mean rally length (rally environment) or success rate (single serves).
+    pub score: f64,
+    /// Rallies or episodes played.
+    pub episodes: usize,
+    /// Longest rally (rally environment; 0 for single serves).
+    #[serde(default)]
+    pub longest: u32,
 }
 
 /// A training environment: a single serve (one robot) or a self-play rally (two).
@@ -281,6 +311,7 @@ pub struct Trainer {
     act_dim: usize,
     /// Robots per environment.
     agents: usize,
+    model: Arc<Model>,
 }
 
 /// The training environment a method runs in; its observation and action sizes.
@@ -298,12 +329,7 @@ fn make_env(
     let grip_floor = config.controller.grip_floor;
     Ok(match config.env {
         TrainEnv::Single => {
-            let kind = match config.serve {
-                TrainServe::P2 => ServeKind::P2,
-                TrainServe::Rally => ServeKind::Rally {
-                    server: sim::arena::Side::B,
-                },
-            };
+            let kind = config.serve.kind();
             let mut env = Env::new(
                 model.clone(),
                 &arena,
@@ -393,6 +419,7 @@ impl Trainer {
                 recent: VecDeque::new(),
                 curve: Vec::new(),
                 warm_start: None,
+                validations: Vec::new(),
             },
             timing: Timing::default(),
             slots,
@@ -401,6 +428,7 @@ impl Trainer {
             act_dim,
             agents,
             config,
+            model,
         })
     }
 
@@ -731,6 +759,59 @@ impl Trainer {
             surrogate: sums.surrogate / count,
             value: sums.value / count,
             entropy: sums.entropy / count,
+        })
+    }
+
+    /// Plays the policy as a checkpoint would play it (its trained Gaussian, seeded per episode) on
+    /// the validation's held-out episodes: self-play rallies in the rally environment (score: mean
+    /// rally length), single serves of the training distribution otherwise (score: success rate).
+    /// Reads the weights and the observation statistics, changes nothing.
+    pub fn validate(&self) -> Result<ValidationPoint, String> {
+        let v = &self.config.validation;
+        let player = crate::factory::PlayerSpec::Checkpoint(Arc::new(self.checkpoint(
+            "validation",
+            "",
+            "",
+        )?));
+        let (config, preset) = (ArenaConfig::default(), sim::arena::MYOCHALLENGE);
+        let (score, longest) = match self.config.env {
+            TrainEnv::Rally => {
+                let spec = crate::matchrun::MatchSpec {
+                    model: self.model.clone(),
+                    config,
+                    preset,
+                    rallies: v.episodes as u32,
+                    seed: v.seed,
+                    replay: false,
+                };
+                let lengths: Vec<u32> = crate::matchrun::play_rallies(&spec, &player, &player)?
+                    .iter()
+                    .map(|r| r.length)
+                    .collect();
+                (
+                    mean_of(lengths.iter().map(|&l| l as f64)),
+                    lengths.iter().copied().max().unwrap_or(0),
+                )
+            }
+            TrainEnv::Single => {
+                let e = crate::eval::Evaluation {
+                    model: self.model.clone(),
+                    config,
+                    preset,
+                    kind: self.config.serve.kind(),
+                    episodes: v.episodes,
+                    seed: v.seed,
+                };
+                let r = crate::eval::evaluate(&e, &player, &|| {})?;
+                (r.success_rate.value, 0)
+            }
+        };
+        Ok(ValidationPoint {
+            iteration: self.progress.iteration,
+            env_steps: self.progress.env_steps,
+            score,
+            episodes: v.episodes,
+            longest,
         })
     }
 
