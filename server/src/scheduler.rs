@@ -456,35 +456,53 @@ pub fn spawn_background(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandl
         }));
     }
     tasks.push(tokio::spawn(async move {
-        // Running matches at the last look, and which of them this process plays (it publishes
-        // those itself).
-        let mut last: Vec<(i64, bool)> = Vec::new();
+        // Every half second: the matches not finished at the last look (and the highest id seen),
+        // so that a match another process claimed and finished between two looks — or queued,
+        // claimed and finished — is still told. This process's own workers publish their matches
+        // themselves; the watcher tells the others' (worker column not ours).
+        let mut last: Vec<(i64, db::MatchStatus)> = Vec::new();
+        let mut seen = loop {
+            match db::workers::last_match_id(&state.pool).await {
+                Ok(id) => break id,
+                Err(_) => tokio::time::sleep(Duration::from_millis(500)).await,
+            }
+        };
         loop {
             tokio::time::sleep(Duration::from_millis(500)).await;
-            let Ok(now) = db::workers::running(&state.pool).await else {
+            let Ok(now) = db::workers::watched(&state.pool, seen).await else {
                 continue;
             };
-            let local = |id: i64| {
-                state
-                    .live
-                    .lock()
-                    .map(|l| l.contains_key(&id))
-                    .unwrap_or(false)
-            };
-            for (id, _) in &now {
-                if !last.iter().any(|(l, _)| l == id) && !local(*id) {
-                    state.publish_match(*id, db::MatchStatus::Running);
+            let ours = |w: &Option<String>| w.as_deref() == Some(state.worker.as_str());
+            for (id, status, worker) in &now {
+                let before = last.iter().find(|(l, _)| l == id).map(|(_, s)| *s);
+                // Finished rows here are new since the last look (above `seen`).
+                let tell = match status {
+                    // Queuing and cancelling happen in an API process, which tells them itself.
+                    db::MatchStatus::Queued | db::MatchStatus::Cancelled => false,
+                    db::MatchStatus::Running => before != Some(db::MatchStatus::Running),
+                    _ => true,
+                };
+                if tell && !ours(worker) {
+                    state.publish_match(*id, *status);
                 }
             }
-            for (id, was_local) in &last {
-                if *was_local || now.iter().any(|(n, _)| n == id) {
+            // Unfinished at the last look, finished now.
+            for (id, _) in &last {
+                if now.iter().any(|(n, ..)| n == id) {
                     continue;
                 }
-                if let Ok(Some(m)) = db::match_row(&state.pool, *id).await {
-                    state.publish_match(*id, m.status);
+                if let Ok(Some((status, worker))) = db::workers::status_of(&state.pool, *id).await {
+                    if !ours(&worker) && status != db::MatchStatus::Cancelled {
+                        state.publish_match(*id, status);
+                    }
                 }
             }
-            last = now.iter().map(|(id, _)| (*id, local(*id))).collect();
+            seen = now.iter().map(|(id, ..)| *id).fold(seen, i64::max);
+            last = now
+                .iter()
+                .filter(|(_, s, _)| matches!(s, db::MatchStatus::Queued | db::MatchStatus::Running))
+                .map(|(id, s, _)| (*id, *s))
+                .collect();
         }
     }));
     tasks

@@ -205,6 +205,40 @@ pub async fn running(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<String>
         .await
 }
 
+/// What the server's watcher looks at: every match not finished yet (queued or running) and every
+/// match with an id above `after` (new since its last look, finished or not), with status and
+/// worker, by id.
+pub async fn watched(
+    pool: &SqlitePool,
+    after: i64,
+) -> sqlx::Result<Vec<(i64, crate::domain::MatchStatus, Option<String>)>> {
+    sqlx::query_as(
+        "SELECT id, status, worker FROM matches \
+         WHERE status IN ('queued', 'running') OR id > ? ORDER BY id",
+    )
+    .bind(after)
+    .fetch_all(pool)
+    .await
+}
+
+/// The highest match id so far (0 when there is none).
+pub async fn last_match_id(pool: &SqlitePool) -> sqlx::Result<i64> {
+    sqlx::query_scalar("SELECT COALESCE(MAX(id), 0) FROM matches")
+        .fetch_one(pool)
+        .await
+}
+
+/// A match's status and worker now, if it exists.
+pub async fn status_of(
+    pool: &SqlitePool,
+    id: i64,
+) -> sqlx::Result<Option<(crate::domain::MatchStatus, Option<String>)>> {
+    sqlx::query_as("SELECT status, worker FROM matches WHERE id = ?")
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
