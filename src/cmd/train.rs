@@ -187,7 +187,8 @@ fn validate(
     let best_before = t.progress.best_validation().map(|b| b.score);
     t.progress.validations.push(point);
     let words = validation_words(t.config.env, &point);
-    if best_before.is_none_or(|b| point.score > b) {
+    let is_best = best_before.is_none_or(|b| point.score > b);
+    if is_best {
         let mut ck = t
             .checkpoint(name, command, commit)
             .map_err(|e| anyhow!(e))?;
@@ -206,7 +207,7 @@ fn validate(
         "validation at iteration {} ({} steps): {words}{}",
         point.iteration,
         point.env_steps,
-        if best_before.is_none_or(|b| point.score > b) {
+        if is_best {
             "  (best so far: best.json)"
         } else {
             ""
