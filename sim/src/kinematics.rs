@@ -225,6 +225,15 @@ impl TendonKinematics {
         }
     }
 
+    /// Recomputes the lengths alone from the site positions in `kin` (the same sums as
+    /// [`TendonKinematics::update`]; the moment arms are left as they were).
+    pub fn update_lengths(&mut self, kin: &Kinematics) {
+        self.length.fill(0.0);
+        for seg in &self.segments {
+            self.length[seg.tendon] += (kin.site_pos[seg.s1] - kin.site_pos[seg.s0]).norm();
+        }
+    }
+
     /// Recomputes lengths and moment arms from the site positions in `kin`.
     pub fn update(&mut self, _model: &Model, kin: &Kinematics) {
         for (t, dofs) in self.dofs.iter().enumerate() {

@@ -112,12 +112,24 @@ fn compare_positions(model_file: &str, fixture: &str) {
     }
     let mut kin = Kinematics::new(&model);
     let mut ten = TendonKinematics::new(&model);
+    let mut lengths_only = TendonKinematics::new(&model);
     let mut worst_len: f64 = 0.0;
     let mut worst_moment: f64 = 0.0;
     for (i, c) in fx["configs"].as_array().unwrap().iter().enumerate() {
         let qpos = nums(&c["qpos"]);
         kin.update(&model, &qpos);
         ten.update(&model, &kin);
+        // The lengths-only update (K-MAC's target) sums the same segments: the same bits.
+        lengths_only.update_lengths(&kin);
+        assert_eq!(
+            lengths_only
+                .length
+                .iter()
+                .map(|l| l.to_bits())
+                .collect::<Vec<_>>(),
+            ten.length.iter().map(|l| l.to_bits()).collect::<Vec<_>>(),
+            "config {i}: lengths-only tendon update differs from the full one"
+        );
         for (s, p) in c["site_xpos"].as_array().unwrap().iter().enumerate() {
             let p = nums(p);
             let d = (kin.site_pos[s] - nalgebra::Vector3::new(p[0], p[1], p[2])).norm();

@@ -223,6 +223,7 @@ fn validate(
 
 /// Runs `rally train`.
 pub fn run(args: &TrainArgs) -> Result<(), CliError> {
+    agents::ppo::fix_matmul_threads();
     let model = super::default_model()?;
     let mut config = match &args.config {
         Some(p) => read_config(p)?,

@@ -80,7 +80,7 @@ impl Kmac {
             self.qpos_target[model.joints[j].qpos_adr] = z;
         }
         model.apply_couplings(&mut self.qpos_target);
-        self.target.update(model, &self.qpos_target);
+        self.target.update_lengths(model, &self.qpos_target);
         self.current.update(model, &state.qpos);
         // 2–5 per muscle.
         for &a in &self.space.muscles {

@@ -118,6 +118,13 @@ impl MuscleGeometry {
         self.ten.update(model, &self.kin);
     }
 
+    /// [`MuscleGeometry::update`] for [`MuscleGeometry::length`] alone (no moment arms, so no
+    /// velocities).
+    fn update_lengths(&mut self, model: &Model, qpos: &[f64]) {
+        self.kin.update(model, qpos);
+        self.ten.update_lengths(&self.kin);
+    }
+
     fn length(&self, model: &Model, a: usize, qpos: &[f64]) -> f64 {
         sim::kinematics::actuator_length(model, model.actuators[a].transmission, &self.ten, qpos)
     }

@@ -19,6 +19,25 @@ pub mod trainer;
 
 use serde::{Deserialize, Serialize};
 
+/// Fixes, once, how many threads candle's matrix products use. Unless `RAYON_NUM_THREADS` is set,
+/// candle works the number out again before every product, on Linux by reading `/proc/cpuinfo`
+/// (`num_cpus::get_physical`): 2 200 reads in a 6 s `rally bench train` here, a few per policy
+/// forward. This builds rayon's global pool first (its size unchanged: `RAYON_NUM_THREADS` if the
+/// user set it, else every logical CPU) and then sets `RAYON_NUM_THREADS` to the count candle would
+/// have chosen, so products run on the same threads as before, without the reads.
+///
+/// Changes the process's environment: call it at the start of a command, before other threads are
+/// started (the `rally train` and `rally bench train` commands do; library code and tests do not).
+pub fn fix_matmul_threads() {
+    if std::env::var_os("RAYON_NUM_THREADS").is_some() {
+        return;
+    }
+    let candle = candle_core::utils::get_num_threads();
+    // Err only when the global pool already exists, whose size then stands as it is.
+    let _ = rayon::ThreadPoolBuilder::new().build_global();
+    std::env::set_var("RAYON_NUM_THREADS", candle.to_string());
+}
+
 use crate::controller::{ControllerSpec, PdGains, Synergies};
 use crate::env::RewardWeights;
 

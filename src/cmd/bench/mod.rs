@@ -258,6 +258,7 @@ pub fn train_rates(seconds: f64) -> anyhow::Result<serde_json::Value> {
     use agents::ppo::trainer::Trainer;
     use agents::ppo::{Method, TrainConfig};
     use rayon::prelude::*;
+    agents::ppo::fix_matmul_threads();
     let model = robot_model()?;
     let config = TrainConfig::default();
     let envs = config.ppo.envs;
