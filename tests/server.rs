@@ -1607,7 +1607,7 @@ fn the_event_stream_tells_a_match_queued_running_and_done() {
 }
 
 #[test]
-fn a_running_match_can_be_watched_live_rally_by_rally() {
+fn a_running_match_can_be_watched_live_as_it_is_played() {
     let dir = tempdir("live");
     let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
     let a = srv.addr.as_str();
@@ -1623,8 +1623,10 @@ fn a_running_match_can_be_watched_live_rally_by_rally() {
     let id = m["id"].as_i64().unwrap();
     wait_for(a, id, "running", Duration::from_secs(30));
     let (mut reader, _) = subscribe(a, &format!("/api/v1/matches/{id}/live"));
-    // Two rallies arrive, each with its record and frames carrying body poses.
+    // Rallies arrive as they are played: their frames (with body poses) a few at a time, in order,
+    // then their record. Two whole rallies, seen from their first frame, are enough.
     let mut rallies = Vec::new();
+    let mut got: std::collections::HashMap<i64, usize> = Default::default();
     let mut event = String::new();
     let started = Instant::now();
     while rallies.len() < 2 {
@@ -1634,13 +1636,35 @@ fn a_running_match_can_be_watched_live_rally_by_rally() {
         if let Some(name) = line.trim().strip_prefix("event:") {
             event = name.trim().to_string();
         } else if let Some(data) = line.trim().strip_prefix("data:") {
-            if event == "rally" {
-                let r: Value = serde_json::from_str(data.trim()).unwrap();
-                assert_eq!(r["match"], id);
-                assert!(r["record"]["length"].is_number(), "{r}");
-                let frames = r["frames"].as_array().unwrap();
-                assert!(!frames.is_empty() && frames[0]["bodies_a"].is_array());
-                rallies.push(r["rally"].as_i64().unwrap());
+            let r: Value = serde_json::from_str(data.trim()).unwrap();
+            assert_eq!(r["match"], id);
+            let k = r["rally"].as_i64().unwrap();
+            match event.as_str() {
+                "frames" => {
+                    let frames = r["frames"].as_array().unwrap();
+                    assert!(
+                        !frames.is_empty() && frames.len() <= server::LIVE_CHUNK,
+                        "{} frames",
+                        frames.len()
+                    );
+                    assert!(frames[0]["bodies_a"].is_array());
+                    let first = r["first"].as_u64().unwrap() as usize;
+                    // Frames of a rally seen from its start come in order, none missing.
+                    let seen = got
+                        .entry(k)
+                        .or_insert(if first == 0 { 0 } else { usize::MAX });
+                    if *seen != usize::MAX {
+                        assert_eq!(first, *seen, "rally {k}: frames in order");
+                        *seen += frames.len();
+                    }
+                }
+                "rally" => {
+                    assert!(r["record"]["length"].is_number(), "{r}");
+                    if got.get(&k).is_some_and(|&n| n != usize::MAX && n > 10) {
+                        rallies.push(k);
+                    }
+                }
+                other => panic!("unexpected event {other}: {r}"),
             }
         }
     }

@@ -280,33 +280,61 @@ pub fn play_match(
         a.build(&spec.model, &spec.preset, 0)?,
         b.build(&spec.model, &spec.preset, 0)?,
     ];
-    play_match_with(spec, players, [a.name(), b.name()], &mut |k, _, _| {
-        progress(k)
+    play_match_with(spec, players, [a.name(), b.name()], &mut |e| {
+        if let MatchEvent::Rally { rally, .. } = e {
+            progress(rally)
+        }
     })
 }
 
-/// [`play_match`] with players already built (named for the record); `on_rally(k, record, frames)`
-/// is called after rally k with its record and replay frames (empty unless `spec.replay`), e.g. to
-/// show a running match live.
+/// What [`play_match_with`] tells its caller while a match is played, e.g. to show it live.
+#[derive(Debug, Clone, Copy)]
+pub enum MatchEvent<'a> {
+    /// Rally `rally` recorded a replay frame (at [`REPLAY_HZ`]; only when the spec keeps frames).
+    Frame {
+        /// The rally's index.
+        rally: u32,
+        /// The frame, as it goes into the replay.
+        frame: &'a Frame,
+    },
+    /// Rally `rally` is over: its record and all its frames (empty unless the spec keeps frames).
+    Rally {
+        /// The rally's index.
+        rally: u32,
+        /// Its record.
+        record: &'a RallyRecord,
+        /// Its replay frames, the same the `Frame` events gave one by one.
+        frames: &'a [Frame],
+    },
+}
+
+/// [`play_match`] with players already built (named for the record); `on_event` hears of every
+/// replay frame as it is recorded and of every rally as it ends.
 pub fn play_match_with(
     spec: &MatchSpec,
     mut players: [Box<dyn Player>; 2],
     names: [String; 2],
-    on_rally: &mut dyn FnMut(u32, &RallyRecord, &[Frame]),
+    on_event: &mut dyn FnMut(MatchEvent<'_>),
 ) -> Result<(MatchRecord, Replay), String> {
     let mut rally = Rally::new(spec.model.clone(), &spec.config, spec.preset)?;
     let mut records = Vec::new();
     let mut replay: Replay = Vec::new();
     let mut points = [0u32; 2];
     for k in 0..spec.rallies {
-        let (record, frames, loser) = play_rally(&mut rally, &mut players, spec, k);
+        let (record, frames, loser) = play_rally(&mut rally, &mut players, spec, k, &mut |frame| {
+            on_event(MatchEvent::Frame { rally: k, frame })
+        });
         if let Some(loser) = loser {
             points[match loser {
                 Side::A => 1,
                 Side::B => 0,
             }] += 1;
         }
-        on_rally(k, &record, &frames);
+        on_event(MatchEvent::Rally {
+            rally: k,
+            record: &record,
+            frames: &frames,
+        });
         records.push(record);
         replay.push(frames);
     }
@@ -374,18 +402,20 @@ pub fn play_rallies(
     Ok(crate::seeds::par_indexed(
         spec.rallies as usize,
         || build().expect("checked above"),
-        |(players, rally), k| play_rally(rally, players, &spec, k as u32).0,
+        |(players, rally), k| play_rally(rally, players, &spec, k as u32, &mut |_| {}).0,
     ))
 }
 
 /// Plays rally `k` of a match on `rally` (reset first: every rally starts from the ready pose with its
 /// own serve and agent seeds, so it depends on nothing but the match seed and `k`); its record, its
-/// replay frames (empty unless `spec.replay`) and the side that failed.
+/// replay frames (empty unless `spec.replay`; each also given to `on_frame` as it is recorded) and
+/// the side that failed.
 fn play_rally(
     rally: &mut Rally,
     players: &mut [Box<dyn Player>; 2],
     spec: &MatchSpec,
     k: u32,
+    on_frame: &mut dyn FnMut(&Frame),
 ) -> (RallyRecord, Vec<Frame>, Option<Side>) {
     let mut ctrl = vec![0.0; spec.model.actuators.len()];
     let server = if k.is_multiple_of(2) {
@@ -408,6 +438,7 @@ fn play_rally(
     loop {
         if spec.replay && step.is_multiple_of(every) {
             frames.push(frame(rally, t0));
+            on_frame(frames.last().expect("just pushed"));
         }
         let mut invalid = None;
         for (i, side) in [Side::A, Side::B].into_iter().enumerate() {
@@ -435,6 +466,7 @@ fn play_rally(
     }
     if spec.replay {
         frames.push(frame(rally, t0));
+        on_frame(frames.last().expect("just pushed"));
     }
     let end = rally.referee.end().expect("a finished rally has an end");
     let record = RallyRecord {
@@ -472,7 +504,7 @@ pub fn replay_rally(
         replay: true,
         ..spec.clone()
     };
-    let (record, frames, _) = play_rally(&mut rally, &mut players, &spec, k);
+    let (record, frames, _) = play_rally(&mut rally, &mut players, &spec, k, &mut |_| {});
     Ok((record, frames))
 }
 

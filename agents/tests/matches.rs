@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use agents::factory::PlayerSpec;
-use agents::matchrun::{play_match, play_match_with, MatchSpec, REPLAY_HZ};
+use agents::matchrun::{play_match, play_match_with, MatchEvent, MatchSpec, REPLAY_HZ};
 use agents::player::{InvalidAction, Player};
 use sim::ball::BallState;
 use sim::robot::Robot;
@@ -89,6 +89,72 @@ impl Player for Nan {
 }
 
 #[test]
+fn a_live_listener_hears_every_replay_frame_as_it_is_recorded_then_the_rally() {
+    // The server's live feed sends frames while a rally is played: they must be the replay's
+    // frames, in order, each rally's before its end.
+    let (a, b) = (
+        PlayerSpec::scripted("scripted").unwrap(),
+        PlayerSpec::scripted("scripted-drive").unwrap(),
+    );
+    let s = spec(3, 5, true);
+    let build = |p: &PlayerSpec| p.build(&s.model, &s.preset, 0).unwrap();
+    let mut heard: Vec<Vec<String>> = vec![Vec::new()];
+    let mut ends = Vec::new();
+    let (record, replay) = play_match_with(
+        &s,
+        [build(&a), build(&b)],
+        [a.name(), b.name()],
+        &mut |e| match e {
+            MatchEvent::Frame { rally, frame } => {
+                assert_eq!(
+                    rally as usize,
+                    heard.len() - 1,
+                    "frames of the rally being played"
+                );
+                heard
+                    .last_mut()
+                    .unwrap()
+                    .push(serde_json::to_string(frame).unwrap());
+            }
+            MatchEvent::Rally {
+                rally,
+                record,
+                frames,
+            } => {
+                let got = heard.last().unwrap();
+                assert_eq!(
+                    got.len(),
+                    frames.len(),
+                    "rally {rally}: every frame heard before its end"
+                );
+                ends.push((rally, record.length));
+                heard.push(Vec::new());
+            }
+        },
+    )
+    .unwrap();
+    heard.pop();
+    let stored: Vec<Vec<String>> = replay
+        .iter()
+        .map(|r| {
+            r.iter()
+                .map(|f| serde_json::to_string(f).unwrap())
+                .collect()
+        })
+        .collect();
+    assert_eq!(heard, stored);
+    assert!(stored.iter().all(|r| r.len() > 10));
+    assert_eq!(
+        ends,
+        record
+            .rallies
+            .iter()
+            .map(|r| (r.index, r.length))
+            .collect::<Vec<_>>()
+    );
+}
+
+#[test]
 fn a_player_producing_nan_loses_with_invalid_action_and_nothing_crashes() {
     let s = spec(2, 1, false);
     let good = PlayerSpec::scripted("scripted")
@@ -99,7 +165,7 @@ fn a_player_producing_nan_loses_with_invalid_action_and_nothing_crashes() {
         &s,
         [good, Box::new(Nan)],
         ["scripted".into(), "nan".into()],
-        &mut |_, _, _| {},
+        &mut |_| {},
     )
     .unwrap();
     for rally in &r.rallies {

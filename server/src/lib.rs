@@ -178,11 +178,25 @@ pub struct ServerEvent {
 /// Events kept for a slow subscriber before it starts missing some (it is told, and refreshes).
 pub const EVENT_BUFFER: usize = 256;
 
-/// A running match's live feed: one JSON message per finished rally.
-pub type LiveChannel = tokio::sync::broadcast::Sender<Arc<String>>;
+/// One message of a running match's live feed: an SSE event name (`frames` or `rally`) and its JSON.
+#[derive(Debug)]
+pub struct LiveMsg {
+    /// The event's name.
+    pub event: &'static str,
+    /// Its JSON data.
+    pub data: String,
+}
 
-/// Rallies a live viewer may fall behind before it skips to the newest (the worker never waits).
-pub const LIVE_BUFFER: usize = 4;
+/// A running match's live feed: the frames of the rally being played, [`LIVE_CHUNK`] at a time as
+/// they are recorded, and each rally's record as it ends.
+pub type LiveChannel = tokio::sync::broadcast::Sender<Arc<LiveMsg>>;
+
+/// Frames per `frames` message of a live feed: 0.2 s of play at the replay's 50 Hz.
+pub const LIVE_CHUNK: usize = 10;
+
+/// Messages a live viewer may fall behind (about 13 s of play: a few rallies) before it skips to
+/// the newest (the worker never waits).
+pub const LIVE_BUFFER: usize = 64;
 
 impl AppState {
     /// Publishes an event to every subscriber; never waits (a subscriber that lags loses the oldest
@@ -231,8 +245,9 @@ pub struct AppState {
     pub qualify: Arc<tokio::sync::Semaphore>,
     /// What changed, for the event stream's subscribers.
     pub events: tokio::sync::broadcast::Sender<ServerEvent>,
-    /// Running matches that can be watched live: each finished rally (record and frames with body
-    /// poses, as JSON) goes to the match's channel, which its worker drops when the match ends.
+    /// Running matches that can be watched live: the frames of the rally being played (with body
+    /// poses, as JSON) and each rally's record go to the match's channel, which its worker drops
+    /// when the match ends.
     pub live: Arc<std::sync::Mutex<std::collections::HashMap<i64, LiveChannel>>>,
     /// Replays of matches that kept no frames are re-simulated, as many at a time as there are workers.
     pub resim: Arc<tokio::sync::Semaphore>,

@@ -72,15 +72,18 @@ pub fn match_spec(state: &AppState, m: &db::Match) -> Result<MatchSpec, String> 
     })
 }
 
-/// Plays stored match `m` to completion (blocking: call it off the async runtime). Each finished
-/// rally goes to the match's live channel while anyone watches (frames with body poses; the frames
-/// are recorded for that even when the match stores none, which changes no result).
+/// Plays stored match `m` to completion (blocking: call it off the async runtime). While anyone
+/// watches, the match's live channel gets the frames of the rally being played, [`crate::LIVE_CHUNK`]
+/// at a time with body poses, and each rally's record as it ends (the frames are recorded for that
+/// even when the match stores none, which changes no result). Sending never waits: a full channel
+/// drops its oldest message for a viewer that lags.
 pub fn play(
     state: &AppState,
     m: &db::Match,
     a: &PlayerSpec,
     b: &PlayerSpec,
 ) -> Result<(agents::matchrun::MatchRecord, agents::matchrun::Replay), String> {
+    use agents::matchrun::MatchEvent;
     let spec = agents::matchrun::MatchSpec {
         replay: true,
         ..match_spec(state, m)?
@@ -95,29 +98,68 @@ pub fn play(
         a.build(&spec.model, &spec.preset, 0)?,
         b.build(&spec.model, &spec.preset, 0)?,
     ];
-    let (record, mut replay) = agents::matchrun::play_match_with(
-        &spec,
-        players,
-        [a.name(), b.name()],
-        &mut |k, rally, frames| {
-            if let Some(tx) = live.as_ref().filter(|tx| tx.receiver_count() > 0) {
-                let frames = serde_json::to_string(frames)
-                    .map_err(|e| e.to_string())
-                    .and_then(|f| crate::replay::with_body_poses(&state.model, &f));
-                if let Ok(frames) = frames {
-                    let msg = format!(
-                        "{{\"match\":{},\"rally\":{k},\"rallies\":{},\"hz\":{},\"record\":{},\"frames\":{frames}}}",
-                        m.id,
-                        m.rallies,
-                        agents::matchrun::REPLAY_HZ,
-                        serde_json::to_string(rally).unwrap_or_else(|_| "null".into())
-                    );
-                    // A full channel drops its oldest message for a lagging viewer; never waits.
-                    let _ = tx.send(Arc::new(msg));
+    // Frames of the current rally not sent yet, and the index of the first of them.
+    let mut chunk: Vec<agents::matchrun::Frame> = Vec::with_capacity(crate::LIVE_CHUNK);
+    let mut first = 0usize;
+    let head = |k: u32| {
+        format!(
+            "\"match\":{},\"rally\":{k},\"rallies\":{},\"hz\":{}",
+            m.id,
+            m.rallies,
+            agents::matchrun::REPLAY_HZ
+        )
+    };
+    let send_frames =
+        |tx: &crate::LiveChannel, k: u32, first: usize, chunk: &[agents::matchrun::Frame]| {
+            let frames = serde_json::to_string(chunk)
+                .map_err(|e| e.to_string())
+                .and_then(|f| crate::replay::with_body_poses(&state.model, &f));
+            if let Ok(frames) = frames {
+                let data = format!("{{{},\"first\":{first},\"frames\":{frames}}}", head(k));
+                let _ = tx.send(Arc::new(crate::LiveMsg {
+                    event: "frames",
+                    data,
+                }));
+            }
+        };
+    let (record, mut replay) =
+        agents::matchrun::play_match_with(&spec, players, [a.name(), b.name()], &mut |e| {
+            let watched = live.as_ref().filter(|tx| tx.receiver_count() > 0);
+            match e {
+                MatchEvent::Frame { rally, frame } => {
+                    let Some(tx) = watched else {
+                        // Nobody watches: keep nothing; a viewer who comes later starts here.
+                        first += chunk.len() + 1;
+                        chunk.clear();
+                        return;
+                    };
+                    chunk.push(frame.clone());
+                    if chunk.len() >= crate::LIVE_CHUNK {
+                        send_frames(tx, rally, first, &chunk);
+                        first += chunk.len();
+                        chunk.clear();
+                    }
+                }
+                MatchEvent::Rally { rally, record, .. } => {
+                    if let Some(tx) = watched {
+                        if !chunk.is_empty() {
+                            send_frames(tx, rally, first, &chunk);
+                        }
+                        let data = format!(
+                            "{{{},\"record\":{}}}",
+                            head(rally),
+                            serde_json::to_string(record).unwrap_or_else(|_| "null".into())
+                        );
+                        let _ = tx.send(Arc::new(crate::LiveMsg {
+                            event: "rally",
+                            data,
+                        }));
+                    }
+                    chunk.clear();
+                    first = 0;
                 }
             }
-        },
-    )?;
+        })?;
     if !m.keep_replay {
         replay.iter_mut().for_each(Vec::clear);
     }

@@ -160,7 +160,7 @@ try {
     await page.close();
   }
 
-  // --- live: a running match's rallies reach the viewer as they are played
+  // --- live: a running match's frames reach the viewer as its rallies are played
   {
     const long = await api('POST', '/matches', { a: 'scripted', b: 'scripted-drive', rallies: 150, seed: 10 });
     for (let i = 0; i < 300 && (await api('GET', `/matches/${long.id}`)).status !== 'running'; i++) await new Promise(r => setTimeout(r, 100));
@@ -168,7 +168,10 @@ try {
     const got = await page.waitForFunction(() => /live: rally \d+ of 150/.test(document.querySelector('#msg').textContent), null, { timeout: 30000 })
       .then(() => true, () => false);
     check(got, `the live view receives rallies of a running match (${await page.textContent('#msg')})`);
+    const clock0 = await page.textContent('#clock');
     await page.waitForTimeout(400);
+    const clock1 = await page.textContent('#clock');
+    check(clock1 !== clock0, `the live view plays the frames it receives (clock ${clock0} → ${clock1})`);
     const ink = await page.evaluate(() => {
       const c = document.querySelector('#view'), d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
       let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n;

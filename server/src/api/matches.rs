@@ -2,11 +2,12 @@
 
 use super::*;
 
-/// `GET /matches/{id}/live`: a running match as it is played (server-sent events): an event `rally`
-/// per finished rally (its record and frames with body poses, as the replay endpoint gives them),
-/// `lagged` when this viewer fell more than `LIVE_BUFFER` rallies behind (it goes on from the
-/// newest), and `end` when the match is over. 409 if the match is not running. The worker never
-/// waits for a viewer.
+/// `GET /matches/{id}/live`: a running match as it is played (server-sent events): events `frames`
+/// (the next `LIVE_CHUNK` frames of rally `rally`, with body poses as the replay endpoint gives them;
+/// `first` is the index of the first in the rally's replay) while a rally is played, `rally` (its
+/// record) as it ends, `lagged` when this viewer fell more than `LIVE_BUFFER` messages behind (it
+/// goes on from the newest kept), and `end` when the match is over. 409 if the match is not
+/// running. The worker never waits for a viewer.
 pub(super) async fn live_match(
     State(s): State<AppState>,
     Path(id): Path<String>,
@@ -58,7 +59,7 @@ pub(super) async fn live_match(
     let stream = futures_util::stream::unfold(Some(rx), |rx| async move {
         let mut rx = rx?;
         let event = match rx.recv().await {
-            Ok(msg) => Event::default().event("rally").data(msg.as_str()),
+            Ok(msg) => Event::default().event(msg.event).data(msg.data.as_str()),
             Err(RecvError::Lagged(n)) => Event::default().event("lagged").data(n.to_string()),
             Err(RecvError::Closed) => {
                 return Some((
