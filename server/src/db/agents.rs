@@ -5,7 +5,7 @@ use super::*;
 /// Registers the scripted variants as built-in agents (idempotent).
 pub async fn register_builtins(pool: &SqlitePool) -> anyhow::Result<()> {
     for (name, _) in ::agents::scripted::variants() {
-        sqlx::query("INSERT OR IGNORE INTO agents (name, kind, spec, spec_hash, builtin) VALUES (?, 'scripted', ?, ?, 1)")
+        sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin) VALUES ($1, 'scripted', $2, $3, 1) ON CONFLICT (name) DO NOTHING")
             .bind(name)
             .bind(name)
             .bind(spec_hash(name))
@@ -52,7 +52,7 @@ pub async fn agents(pool: &SqlitePool) -> sqlx::Result<Vec<Agent>> {
 
 /// One agent.
 pub async fn agent(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Agent>> {
-    sqlx::query_as(&format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = ?"))
+    sqlx::query_as(&format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = $1"))
         .bind(id)
         .fetch_optional(pool)
         .await
@@ -61,7 +61,7 @@ pub async fn agent(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Agent>> {
 /// The agent with a name.
 pub async fn agent_by_name(pool: &SqlitePool, name: &str) -> sqlx::Result<Option<Agent>> {
     sqlx::query_as(&format!(
-        "SELECT {AGENT_COLUMNS} FROM agents WHERE name = ?"
+        "SELECT {AGENT_COLUMNS} FROM agents WHERE name = $1"
     ))
     .bind(name)
     .fetch_optional(pool)
@@ -70,7 +70,7 @@ pub async fn agent_by_name(pool: &SqlitePool, name: &str) -> sqlx::Result<Option
 
 /// An agent's kind and spec (for playing it).
 pub async fn agent_spec(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<(AgentKind, String)>> {
-    sqlx::query_as("SELECT kind, spec FROM agents WHERE id = ?")
+    sqlx::query_as("SELECT kind, spec FROM agents WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await
@@ -85,8 +85,8 @@ pub async fn insert_checkpoint_agent(
     builtin: bool,
     submitted_by: Option<i64>,
 ) -> sqlx::Result<i64> {
-    let r = sqlx::query(
-        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, builtin, submitted_by) VALUES (?, 'checkpoint', ?, ?, ?, ?, ?, ?, ?, ?)",
+    sqlx::query_scalar(
+        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, builtin, submitted_by) VALUES ($1, 'checkpoint', $2, $3, $4, $5, $6, $7, $8, $9) RETURNING id",
     )
     .bind(name)
     .bind(spec)
@@ -95,9 +95,8 @@ pub async fn insert_checkpoint_agent(
     .bind(qual.1)
     .bind(qual.2)
     .bind(qual.3)
-    .bind(builtin)
+    .bind(builtin as i64)
     .bind(submitted_by)
-    .execute(pool)
-    .await?;
-    Ok(r.last_insert_rowid())
+    .fetch_one(pool)
+    .await
 }

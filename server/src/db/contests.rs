@@ -56,16 +56,15 @@ pub async fn create_tournament(pool: &SqlitePool, plan: TournamentPlan<'_>) -> s
     } = plan;
     let mut tx = pool.begin().await?;
     let ids: Vec<i64> = agents.iter().map(|a| a.id).collect();
-    let t = sqlx::query("INSERT INTO tournaments (kind, agents_json, rallies_per_match, rounds, seed, created_by) VALUES (?, ?, ?, ?, ?, ?)")
+    let t: i64 = sqlx::query_scalar("INSERT INTO tournaments (kind, agents_json, rallies_per_match, rounds, seed, created_by) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
         .bind(kind)
         .bind(serde_json::to_string(&ids).unwrap_or_default())
         .bind(rallies as i64)
         .bind(rounds as i64)
         .bind(seed as i64)
         .bind(created_by)
-        .execute(&mut *tx)
-        .await?
-        .last_insert_rowid();
+        .fetch_one(&mut *tx)
+        .await?;
     for (k, &(a, b)) in pairs.iter().enumerate() {
         let origin = Origin {
             tournament: Some(t),
@@ -84,7 +83,7 @@ pub async fn create_tournament(pool: &SqlitePool, plan: TournamentPlan<'_>) -> s
 
 /// One tournament.
 pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tournament>> {
-    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments WHERE id = ?")
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await
@@ -92,7 +91,7 @@ pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tourn
 
 /// Tournaments, newest first.
 pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tournament>> {
-    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments ORDER BY id DESC LIMIT ?")
+    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments ORDER BY id DESC LIMIT $1")
         .bind(limit)
         .fetch_all(pool)
         .await
@@ -101,7 +100,7 @@ pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tour
 /// A tournament's matches in the order they were queued.
 pub async fn tournament_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {cols} FROM matches WHERE tournament_id = ? ORDER BY id",
+        "SELECT {cols} FROM matches WHERE tournament_id = $1 ORDER BY id",
         cols = match_columns()
     ))
     .bind(id)
@@ -111,7 +110,7 @@ pub async fn tournament_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<
 
 /// Cancels a tournament's queued and running matches; how many.
 pub async fn cancel_tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<u64> {
-    let r = sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE tournament_id = ? AND status IN ('queued', 'running')")
+    let r = sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE tournament_id = $1 AND status IN ('queued', 'running')")
         .bind(id)
         .execute(pool)
         .await?;
@@ -185,7 +184,7 @@ pub async fn create_sprt(
     created_by: Option<i64>,
 ) -> sqlx::Result<i64> {
     let mut tx = pool.begin().await?;
-    let id = sqlx::query("INSERT INTO sprts (agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, created_by) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'running', ?)")
+    let id: i64 = sqlx::query_scalar("INSERT INTO sprts (agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, created_by) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, 'running', $10) RETURNING id")
         .bind(a.id)
         .bind(b.id)
         .bind(p.elo0)
@@ -196,9 +195,8 @@ pub async fn create_sprt(
         .bind(p.max_matches as i64)
         .bind(p.seed as i64)
         .bind(created_by)
-        .execute(&mut *tx)
-        .await?
-        .last_insert_rowid();
+        .fetch_one(&mut *tx)
+        .await?;
     let origin = Origin {
         tournament: None,
         sprt: Some(id),
@@ -211,7 +209,7 @@ pub async fn create_sprt(
 
 /// One SPRT.
 pub async fn sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Sprt>> {
-    sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
+    sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
         .bind(id)
         .fetch_optional(pool)
         .await
@@ -220,7 +218,7 @@ pub async fn sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Sprt>> {
 /// SPRTs, newest first.
 pub async fn sprts(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
     sqlx::query_as(&format!(
-        "SELECT {SPRT_COLUMNS} FROM sprts ORDER BY id DESC LIMIT ?"
+        "SELECT {SPRT_COLUMNS} FROM sprts ORDER BY id DESC LIMIT $1"
     ))
     .bind(limit)
     .fetch_all(pool)
@@ -230,7 +228,7 @@ pub async fn sprts(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
 /// An SPRT's matches in order.
 pub async fn sprt_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {cols} FROM matches WHERE sprt_id = ? ORDER BY id",
+        "SELECT {cols} FROM matches WHERE sprt_id = $1 ORDER BY id",
         cols = match_columns()
     ))
     .bind(id)
@@ -244,12 +242,12 @@ pub async fn end_sprt(
     id: i64,
     status: SprtStatus,
 ) -> sqlx::Result<bool> {
-    let r = sqlx::query("UPDATE sprts SET status = ?, finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status = 'running'")
+    let r = sqlx::query("UPDATE sprts SET status = $1, finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE id = $2 AND status = 'running'")
         .bind(status)
         .bind(id)
         .execute(&mut *conn)
         .await?;
-    sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE sprt_id = ? AND status IN ('queued', 'running')")
+    sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE sprt_id = $1 AND status IN ('queued', 'running')")
         .bind(id)
         .execute(&mut *conn)
         .await?;
@@ -269,14 +267,15 @@ pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
 /// if it goes on). One match at a time, so the test's course depends only on its seeds. SPRT
 /// matches keep no replay frames (the replay endpoint re-simulates a rally on request).
 pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<()> {
-    let s: Option<Sprt> = sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = ?"))
-        .bind(id)
-        .fetch_optional(&mut *conn)
-        .await?;
+    let s: Option<Sprt> =
+        sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
+            .bind(id)
+            .fetch_optional(&mut *conn)
+            .await?;
     let Some(s) = s.filter(|s| s.status == SprtStatus::Running) else {
         return Ok(());
     };
-    let done: Vec<(i64, i64, i64)> = sqlx::query_as("SELECT agent_a, points_a, points_b FROM matches WHERE sprt_id = ? AND status = 'done' ORDER BY id")
+    let done: Vec<(i64, i64, i64)> = sqlx::query_as("SELECT agent_a, points_a, points_b FROM matches WHERE sprt_id = $1 AND status = 'done' ORDER BY id")
         .bind(id)
         .fetch_all(&mut *conn)
         .await?;
@@ -292,7 +291,7 @@ pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sql
         seed: s.seed as u64,
     };
     let step = crate::domain::sprt_step(&spec, &done);
-    sqlx::query("UPDATE sprts SET llr = ?, matches_done = ?, status = ?, finished_at = CASE WHEN ? = 'running' THEN NULL ELSE CURRENT_TIMESTAMP END WHERE id = ?")
+    sqlx::query("UPDATE sprts SET llr = $1, matches_done = $2, status = $3, finished_at = CASE WHEN $4 = 'running' THEN NULL ELSE CAST(CURRENT_TIMESTAMP AS TEXT) END WHERE id = $5")
         .bind(step.llr)
         .bind(step.matches_done as i64)
         .bind(step.status)
@@ -303,7 +302,7 @@ pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sql
     let Some(next) = step.next else {
         return Ok(());
     };
-    let sql = format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = ?");
+    let sql = format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = $1");
     let agent = |id: i64| sqlx::query_as::<_, Agent>(&sql).bind(id);
     let a = agent(next.a).fetch_one(&mut *conn).await?;
     let b = agent(next.b).fetch_one(&mut *conn).await?;

@@ -132,8 +132,8 @@ pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
     keep_replay: bool,
     origin: Origin,
 ) -> sqlx::Result<i64> {
-    let r = sqlx::query(
-        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id, created_by) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?)",
+    sqlx::query_scalar(
+        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id, created_by) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, 'queued', $10, $11, $12) RETURNING id",
     )
     .bind(a.id)
     .bind(b.id)
@@ -143,19 +143,18 @@ pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
     .bind(sim::SIM_VERSION)
     .bind(&a.spec_hash)
     .bind(&b.spec_hash)
-    .bind(keep_replay)
+    .bind(keep_replay as i64)
     .bind(origin.tournament)
     .bind(origin.sprt)
     .bind(origin.created_by)
-    .execute(db)
-    .await?;
-    Ok(r.last_insert_rowid())
+    .fetch_one(db)
+    .await
 }
 
 /// One match.
 pub async fn match_row(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {} FROM matches WHERE id = ?",
+        "SELECT {} FROM matches WHERE id = $1",
         match_columns()
     ))
     .bind(id)
@@ -181,7 +180,7 @@ pub async fn matches(
     limit: i64,
 ) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
-        "SELECT {cols} FROM matches WHERE (?1 IS NULL OR agent_a = ?1 OR agent_b = ?1) AND (?2 IS NULL OR status = ?2) AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4",
+        "SELECT {cols} FROM matches WHERE ($1 IS NULL OR agent_a = $1 OR agent_b = $1) AND ($2 IS NULL OR status = $2) AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4",
         cols = match_columns()
     ))
     .bind(filter.agent)
@@ -217,7 +216,7 @@ pub async fn store_result(
     // writers) instead of upgrading a read lock later.
     let mut tx = pool.begin().await?;
     let marked: Option<(i64, i64, Option<i64>)> = sqlx::query_as(
-        "UPDATE matches SET status = 'done', finished_at = CURRENT_TIMESTAMP, points_a = ?, points_b = ?, mean_rally_length = ?, max_rally_length = ?, in_box_fraction = ?, energy_distance = ?, drift_slope = ?, drift_json = ? WHERE id = ? AND status = 'running' AND worker = ? AND attempts = ? RETURNING agent_a, agent_b, sprt_id",
+        "UPDATE matches SET status = 'done', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT), points_a = $1, points_b = $2, mean_rally_length = $3, max_rally_length = $4, in_box_fraction = $5, energy_distance = $6, drift_slope = $7, drift_json = $8 WHERE id = $9 AND status = 'running' AND worker = $10 AND attempts = $11 RETURNING agent_a, agent_b, sprt_id",
     )
     .bind(r.points[0] as i64)
     .bind(r.points[1] as i64)
@@ -236,11 +235,11 @@ pub async fn store_result(
         tx.rollback().await?;
         return lost_or_cancelled(pool, id).await;
     };
-    sqlx::query("UPDATE matches SET lease_expires_ms = NULL WHERE id = ?")
+    sqlx::query("UPDATE matches SET lease_expires_ms = NULL WHERE id = $1")
         .bind(id)
         .execute(&mut *tx)
         .await?;
-    sqlx::query("UPDATE workers SET matches_played = matches_played + 1 WHERE name = ?")
+    sqlx::query("UPDATE workers SET matches_played = matches_played + 1 WHERE name = $1")
         .bind(&lease.worker)
         .execute(&mut *tx)
         .await?;
@@ -248,7 +247,7 @@ pub async fn store_result(
         ("A", agent_a, &r.drift_by_player[0]),
         ("B", agent_b, &r.drift_by_player[1]),
     ] {
-        sqlx::query("INSERT INTO match_drift (match_id, side, agent_id, crossings, in_box_fraction, energy_distance, drift_slope, drift_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?)")
+        sqlx::query("INSERT INTO match_drift (match_id, side, agent_id, crossings, in_box_fraction, energy_distance, drift_slope, drift_json) VALUES ($1, $2, $3, $4, $5, $6, $7, $8)")
             .bind(id)
             .bind(side)
             .bind(agent)
@@ -262,14 +261,14 @@ pub async fn store_result(
     }
     // Glicko-2, online: both sides' last ratings in, `domain::rating_update` decides.
     let last = |agent: i64| {
-        sqlx::query_as::<_, (f64, f64, f64)>("SELECT rating, deviation, volatility FROM rating_history WHERE agent_id = ? ORDER BY seq DESC LIMIT 1").bind(agent)
+        sqlx::query_as::<_, (f64, f64, f64)>("SELECT rating, deviation, volatility FROM rating_history WHERE agent_id = $1 ORDER BY seq DESC LIMIT 1").bind(agent)
     };
     let prior = [
         last(agent_a).fetch_optional(&mut *tx).await?,
         last(agent_b).fetch_optional(&mut *tx).await?,
     ];
     for (agent, g) in crate::domain::rating_update([agent_a, agent_b], prior, r.points) {
-        sqlx::query("INSERT INTO rating_history (match_id, agent_id, rating, deviation, volatility) VALUES (?, ?, ?, ?, ?)")
+        sqlx::query("INSERT INTO rating_history (match_id, agent_id, rating, deviation, volatility) VALUES ($1, $2, $3, $4, $5)")
             .bind(id)
             .bind(agent)
             .bind(g.0)
@@ -279,7 +278,7 @@ pub async fn store_result(
             .await?;
     }
     for rally in &r.rallies {
-        sqlx::query("INSERT INTO rallies (match_id, idx, server, length, end_reason, failing_side, duration) VALUES (?, ?, ?, ?, ?, ?, ?)")
+        sqlx::query("INSERT INTO rallies (match_id, idx, server, length, end_reason, failing_side, duration) VALUES ($1, $2, $3, $4, $5, $6, $7)")
             .bind(id)
             .bind(rally.index as i64)
             .bind(rally.server)
@@ -290,7 +289,7 @@ pub async fn store_result(
             .execute(&mut *tx)
             .await?;
         for (seq, c) in rally.crossings.iter().enumerate() {
-            sqlx::query("INSERT INTO crossings (match_id, rally_idx, seq, receiver, exchange, y_r, z, in_box, extrapolated) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
+            sqlx::query("INSERT INTO crossings (match_id, rally_idx, seq, receiver, exchange, y_r, z, in_box, extrapolated) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)")
                 .bind(id)
                 .bind(rally.index as i64)
                 .bind(seq as i64)
@@ -298,13 +297,13 @@ pub async fn store_result(
                 .bind(c.exchange as i64)
                 .bind(c.y_r)
                 .bind(c.z)
-                .bind(c.in_box)
-                .bind(c.extrapolated)
+                .bind(c.in_box as i64)
+                .bind(c.extrapolated as i64)
                 .execute(&mut *tx)
                 .await?;
         }
         if let Some(frames) = replay.get(rally.index as usize).filter(|f| !f.is_empty()) {
-            sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES (?, ?, ?)")
+            sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES ($1, $2, $3)")
                 .bind(id)
                 .bind(rally.index as i64)
                 .bind(gzip_json(frames))
@@ -321,7 +320,7 @@ pub async fn store_result(
 
 /// Why a worker's write under its lease matched no row: the match was cancelled, or the lease lost.
 async fn lost_or_cancelled(pool: &SqlitePool, id: i64) -> sqlx::Result<Stored> {
-    let status: Option<(MatchStatus,)> = sqlx::query_as("SELECT status FROM matches WHERE id = ?")
+    let status: Option<(MatchStatus,)> = sqlx::query_as("SELECT status FROM matches WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await?;
@@ -335,7 +334,7 @@ async fn lost_or_cancelled(pool: &SqlitePool, id: i64) -> sqlx::Result<Stored> {
 /// to fails with it (one transaction).
 pub async fn fail(pool: &SqlitePool, lease: &Lease, error: &str) -> sqlx::Result<Stored> {
     let mut tx = pool.begin().await?;
-    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = CURRENT_TIMESTAMP, error = ?, lease_expires_ms = NULL WHERE id = ? AND status = 'running' AND worker = ? AND attempts = ? RETURNING sprt_id")
+    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT), error = $1, lease_expires_ms = NULL WHERE id = $2 AND status = 'running' AND worker = $3 AND attempts = $4 RETURNING sprt_id")
         .bind(error)
         .bind(lease.match_id)
         .bind(&lease.worker)
@@ -357,7 +356,7 @@ pub async fn fail(pool: &SqlitePool, lease: &Lease, error: &str) -> sqlx::Result
 /// false if it had already finished (or does not exist).
 pub async fn cancel(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
     let mut tx = pool.begin().await?;
-    let r: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'cancelled', finished_at = CURRENT_TIMESTAMP WHERE id = ? AND status IN ('queued', 'running') RETURNING sprt_id")
+    let r: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'cancelled', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE id = $1 AND status IN ('queued', 'running') RETURNING sprt_id")
         .bind(id)
         .fetch_optional(&mut *tx)
         .await?;
@@ -387,7 +386,7 @@ pub struct Rally {
 
 /// A match's rallies.
 pub async fn rallies(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Rally>> {
-    sqlx::query_as("SELECT idx, server, length, end_reason, failing_side, duration FROM rallies WHERE match_id = ? ORDER BY idx")
+    sqlx::query_as("SELECT idx, server, length, end_reason, failing_side, duration FROM rallies WHERE match_id = $1 ORDER BY idx")
         .bind(id)
         .fetch_all(pool)
         .await
@@ -396,7 +395,7 @@ pub async fn rallies(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Rally>> {
 /// A rally's replay frames (JSON), if stored.
 pub async fn replay(pool: &SqlitePool, id: i64, rally: i64) -> anyhow::Result<Option<String>> {
     let r: Option<(Vec<u8>,)> =
-        sqlx::query_as("SELECT frames_gz FROM replays WHERE match_id = ? AND rally_idx = ?")
+        sqlx::query_as("SELECT frames_gz FROM replays WHERE match_id = $1 AND rally_idx = $2")
             .bind(id)
             .bind(rally)
             .fetch_optional(pool)
@@ -419,7 +418,7 @@ fn gzip_json<T: Serialize>(value: &T) -> Vec<u8> {
 /// The stored drift statistics of a match (JSON).
 pub async fn drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<String>> {
     let r: Option<(Option<String>,)> =
-        sqlx::query_as("SELECT drift_json FROM matches WHERE id = ?")
+        sqlx::query_as("SELECT drift_json FROM matches WHERE id = $1")
             .bind(id)
             .fetch_optional(pool)
             .await?;
@@ -445,7 +444,7 @@ mod tests {
         let old = queue_match(&pool, a, b, 2, 2, true, Origin::default())
             .await
             .unwrap();
-        sqlx::query("UPDATE matches SET sim_version = '0.1.0' WHERE id = ?")
+        sqlx::query("UPDATE matches SET sim_version = '0.1.0' WHERE id = $1")
             .bind(old)
             .execute(&pool)
             .await

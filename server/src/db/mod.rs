@@ -1,5 +1,10 @@
 //! Storage: SQLite through sqlx (WAL), the `migrations/` applied at start. Every state change of a match
 //! is one transaction. Runtime queries only (no build-time database).
+//!
+//! The queries are written in the SQL that SQLite and PostgreSQL share, the first step towards the
+//! second engine (issue 12): numbered parameters (`$1`), `RETURNING id` rather than SQLite's last row
+//! id, `ON CONFLICT … DO NOTHING` rather than `INSERT OR IGNORE`, timestamps cast to text, booleans
+//! bound as integers.
 
 use std::path::Path;
 use std::str::FromStr;

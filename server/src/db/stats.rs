@@ -63,7 +63,7 @@ pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<
         "SELECT COUNT(*) AS matches, COALESCE(SUM(crossings), 0) AS crossings, \
          SUM(in_box_fraction * crossings) / NULLIF(SUM(crossings), 0) AS in_box_fraction, \
          AVG(energy_distance) AS energy_distance, AVG(drift_slope) AS drift_slope \
-         FROM match_drift WHERE agent_id = ?",
+         FROM match_drift WHERE agent_id = $1",
     )
     .bind(agent)
     .fetch_one(pool)
@@ -75,7 +75,7 @@ pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<
 pub async fn agent_rally_lengths(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<(i64, i64)>> {
     sqlx::query_as(
         "SELECT r.length, COUNT(*) FROM rallies r JOIN matches m ON m.id = r.match_id \
-         WHERE m.status = 'done' AND (m.agent_a = ? OR m.agent_b = ?) GROUP BY r.length ORDER BY r.length",
+         WHERE m.status = 'done' AND (m.agent_a = $1 OR m.agent_b = $2) GROUP BY r.length ORDER BY r.length",
     )
     .bind(agent)
     .bind(agent)
@@ -111,8 +111,8 @@ pub async fn agent_crossings(
     limit: i64,
 ) -> sqlx::Result<(i64, Vec<AgentCrossing>)> {
     const MINE: &str = "FROM crossings c JOIN matches m ON m.id = c.match_id \
-        WHERE m.status = 'done' AND ((m.agent_a = ?1 AND (c.exchange = 0 OR c.receiver = 'b')) \
-        OR (m.agent_b = ?1 AND (c.exchange = 0 OR c.receiver = 'a')))";
+        WHERE m.status = 'done' AND ((m.agent_a = $1 AND (c.exchange = 0 OR c.receiver = 'b')) \
+        OR (m.agent_b = $1 AND (c.exchange = 0 OR c.receiver = 'a')))";
     let (total,): (i64,) = sqlx::query_as(&format!("SELECT COUNT(*) {MINE}"))
         .bind(agent)
         .fetch_one(pool)
@@ -120,7 +120,7 @@ pub async fn agent_crossings(
     let rows = sqlx::query_as(&format!(
         "SELECT c.match_id AS match_id, c.rally_idx AS rally, c.exchange AS exchange, c.y_r AS y_r, c.z AS z, \
          c.in_box AS in_box, c.extrapolated AS extrapolated {MINE} \
-         ORDER BY c.match_id DESC, c.rally_idx, c.seq LIMIT ?2"
+         ORDER BY c.match_id DESC, c.rally_idx, c.seq LIMIT $2"
     ))
     .bind(agent)
     .bind(limit)
@@ -148,7 +148,7 @@ pub struct RatingPoint {
 
 /// An agent's rating history, oldest first.
 pub async fn rating_history(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<RatingPoint>> {
-    sqlx::query_as("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = ? ORDER BY seq")
+    sqlx::query_as("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = $1 ORDER BY seq")
         .bind(agent)
         .fetch_all(pool)
         .await
@@ -157,7 +157,7 @@ pub async fn rating_history(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<R
 /// The drift statistics of one side of a match: (side, agent, JSON).
 pub async fn match_drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<(String, i64, String)>> {
     sqlx::query_as(
-        "SELECT side, agent_id, drift_json FROM match_drift WHERE match_id = ? ORDER BY side",
+        "SELECT side, agent_id, drift_json FROM match_drift WHERE match_id = $1 ORDER BY side",
     )
     .bind(id)
     .fetch_all(pool)

@@ -58,7 +58,7 @@ pub struct Worker {
 pub async fn requeue_expired(pool: &SqlitePool, now: i64) -> sqlx::Result<u64> {
     let r = sqlx::query(
         "UPDATE matches SET status = 'queued', started_at = NULL, worker = NULL, lease_expires_ms = NULL \
-         WHERE status = 'running' AND (lease_expires_ms IS NULL OR lease_expires_ms < ?)",
+         WHERE status = 'running' AND (lease_expires_ms IS NULL OR lease_expires_ms < $1)",
     )
     .bind(now)
     .execute(pool)
@@ -71,7 +71,7 @@ pub async fn requeue_expired(pool: &SqlitePool, now: i64) -> sqlx::Result<u64> {
 pub async fn requeue_held_by(pool: &SqlitePool, worker: &str) -> sqlx::Result<u64> {
     let r = sqlx::query(
         "UPDATE matches SET status = 'queued', started_at = NULL, worker = NULL, lease_expires_ms = NULL \
-         WHERE status = 'running' AND worker = ?",
+         WHERE status = 'running' AND worker = $1",
     )
     .bind(worker)
     .execute(pool)
@@ -89,8 +89,8 @@ pub async fn claim(
     let now = now_ms();
     requeue_expired(pool, now).await?;
     let row: Option<(i64, i64)> = sqlx::query_as(
-        "UPDATE matches SET status = 'running', started_at = CURRENT_TIMESTAMP, worker = ?, \
-         lease_expires_ms = ?, attempts = attempts + 1 \
+        "UPDATE matches SET status = 'running', started_at = CAST(CURRENT_TIMESTAMP AS TEXT), worker = $1, \
+         lease_expires_ms = $2, attempts = attempts + 1 \
          WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1) AND status = 'queued' \
          RETURNING id, attempts",
     )
@@ -127,7 +127,7 @@ pub async fn register(
 ) -> anyhow::Result<()> {
     let now = now_ms();
     let live: Option<(i64, String, i64)> = sqlx::query_as(
-        "SELECT heartbeat_ms, host, pid FROM workers WHERE name = ? AND status = 'running'",
+        "SELECT heartbeat_ms, host, pid FROM workers WHERE name = $1 AND status = 'running'",
     )
     .bind(name)
     .fetch_optional(pool)
@@ -143,7 +143,7 @@ pub async fn register(
         }
     }
     sqlx::query(
-        "INSERT INTO workers (name, host, pid, slots, started_ms, heartbeat_ms, status) VALUES (?, ?, ?, ?, ?, ?, 'running') \
+        "INSERT INTO workers (name, host, pid, slots, started_ms, heartbeat_ms, status) VALUES ($1, $2, $3, $4, $5, $6, 'running') \
          ON CONFLICT (name) DO UPDATE SET host = excluded.host, pid = excluded.pid, slots = excluded.slots, \
          started_ms = excluded.started_ms, heartbeat_ms = excluded.heartbeat_ms, status = 'running'",
     )
@@ -165,14 +165,14 @@ pub async fn heartbeat(pool: &SqlitePool, name: &str, lease_ms: i64) -> sqlx::Re
     let now = now_ms();
     let mut tx = pool.begin().await?;
     let renewed = sqlx::query(
-        "UPDATE matches SET lease_expires_ms = ? WHERE status = 'running' AND worker = ?",
+        "UPDATE matches SET lease_expires_ms = $1 WHERE status = 'running' AND worker = $2",
     )
     .bind(now + lease_ms)
     .bind(name)
     .execute(&mut *tx)
     .await?
     .rows_affected();
-    sqlx::query("UPDATE workers SET heartbeat_ms = ?, status = 'running' WHERE name = ?")
+    sqlx::query("UPDATE workers SET heartbeat_ms = $1, status = 'running' WHERE name = $2")
         .bind(now)
         .bind(name)
         .execute(&mut *tx)
@@ -183,7 +183,7 @@ pub async fn heartbeat(pool: &SqlitePool, name: &str, lease_ms: i64) -> sqlx::Re
 
 /// Marks worker `name` stopped (it finished its matches and exits).
 pub async fn stopped(pool: &SqlitePool, name: &str) -> sqlx::Result<()> {
-    sqlx::query("UPDATE workers SET status = 'stopped', heartbeat_ms = ? WHERE name = ?")
+    sqlx::query("UPDATE workers SET status = 'stopped', heartbeat_ms = $1 WHERE name = $2")
         .bind(now_ms())
         .bind(name)
         .execute(pool)
@@ -214,7 +214,7 @@ pub async fn watched(
 ) -> sqlx::Result<Vec<(i64, crate::domain::MatchStatus, Option<String>)>> {
     sqlx::query_as(
         "SELECT id, status, worker FROM matches \
-         WHERE status IN ('queued', 'running') OR id > ? ORDER BY id",
+         WHERE status IN ('queued', 'running') OR id > $1 ORDER BY id",
     )
     .bind(after)
     .fetch_all(pool)
@@ -233,7 +233,7 @@ pub async fn status_of(
     pool: &SqlitePool,
     id: i64,
 ) -> sqlx::Result<Option<(crate::domain::MatchStatus, Option<String>)>> {
-    sqlx::query_as("SELECT status, worker FROM matches WHERE id = ?")
+    sqlx::query_as("SELECT status, worker FROM matches WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await
