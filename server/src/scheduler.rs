@@ -98,9 +98,10 @@ pub fn play(
         a.build(&spec.model, &spec.preset, 0)?,
         b.build(&spec.model, &spec.preset, 0)?,
     ];
-    // Frames of the current rally not sent yet, and the index of the first of them.
+    // Frames of the current rally not sent yet, and how many it has recorded (the last of `chunk`
+    // is frame `recorded - 1`).
     let mut chunk: Vec<agents::matchrun::Frame> = Vec::with_capacity(crate::LIVE_CHUNK);
-    let mut first = 0usize;
+    let mut recorded = 0usize;
     let head = |k: u32| {
         format!(
             "\"match\":{},\"rally\":{k},\"rallies\":{},\"hz\":{}",
@@ -110,7 +111,8 @@ pub fn play(
         )
     };
     let send_frames =
-        |tx: &crate::LiveChannel, k: u32, first: usize, chunk: &[agents::matchrun::Frame]| {
+        |tx: &crate::LiveChannel, k: u32, recorded: usize, chunk: &[agents::matchrun::Frame]| {
+            let first = recorded - chunk.len();
             let frames = serde_json::to_string(chunk)
                 .map_err(|e| e.to_string())
                 .and_then(|f| crate::replay::with_body_poses(&state.model, &f));
@@ -127,23 +129,22 @@ pub fn play(
             let watched = live.as_ref().filter(|tx| tx.receiver_count() > 0);
             match e {
                 MatchEvent::Frame { rally, frame } => {
+                    recorded += 1;
                     let Some(tx) = watched else {
                         // Nobody watches: keep nothing; a viewer who comes later starts here.
-                        first += chunk.len() + 1;
                         chunk.clear();
                         return;
                     };
                     chunk.push(frame.clone());
                     if chunk.len() >= crate::LIVE_CHUNK {
-                        send_frames(tx, rally, first, &chunk);
-                        first += chunk.len();
+                        send_frames(tx, rally, recorded, &chunk);
                         chunk.clear();
                     }
                 }
                 MatchEvent::Rally { rally, record, .. } => {
                     if let Some(tx) = watched {
                         if !chunk.is_empty() {
-                            send_frames(tx, rally, first, &chunk);
+                            send_frames(tx, rally, recorded, &chunk);
                         }
                         let data = format!(
                             "{{{},\"record\":{}}}",
@@ -156,7 +157,7 @@ pub fn play(
                         }));
                     }
                     chunk.clear();
-                    first = 0;
+                    recorded = 0;
                 }
             }
         })?;
