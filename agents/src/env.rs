@@ -60,6 +60,11 @@ pub struct RewardTerms {
     /// Dual rally only (sparse): the robot's return really crossed the other hitting plane inside the
     /// serve box (paper §IV-C).
     pub dual: f64,
+    /// Effort (dense, ours; the official code has none): the step's mean muscle activation
+    /// `‖a‖₁/n_a`, the metric `rally eval` reports beside effort (DESIGN §7); a negative weight prices
+    /// activation. 0 unless weighted.
+    #[serde(default)]
+    pub effort: f64,
 }
 
 impl RewardTerms {
@@ -78,6 +83,7 @@ impl RewardTerms {
             + w.fault * self.fault
             + w.ready * self.ready
             + w.dual * self.dual
+            + w.effort * self.effort
     }
 }
 
@@ -109,6 +115,7 @@ impl Default for RewardWeights {
             fault: -20.0,
             ready: 10.0,
             dual: 100.0,
+            effort: 0.0,
         })
     }
 }
@@ -124,6 +131,17 @@ pub const MISS_GRACE: f64 = 0.05;
 /// Grasp term: 1 while the paddle is at its place in the hand, `exp(−20·d)` once it slips.
 pub fn grasp_term(robot: &Robot) -> f64 {
     (-20.0 * robot.paddle_offset()).exp()
+}
+
+/// The robot's mean muscle activation `‖a‖₁/n_a` (DESIGN §7's mean activation, one step).
+pub fn mean_activation(robot: &Robot) -> f64 {
+    let (sum, n) = robot
+        .model()
+        .muscles()
+        .fold((0.0, 0usize), |(s, n), (i, _)| {
+            (s + robot.state.act[i].abs(), n + 1)
+        });
+    sum / n.max(1) as f64
 }
 
 /// Dense pose terms against the plan: `exp(−8·d)` of the blade centre's distance to the strike point,
@@ -206,6 +224,7 @@ impl StrokeReward {
     ) -> (RewardTerms, bool) {
         let mut terms = RewardTerms {
             grasp: grasp_term(robot),
+            effort: mean_activation(robot),
             ..RewardTerms::default()
         };
         let touched = !self.judged && (contact || self.since_contact.is_some());

@@ -190,10 +190,6 @@ struct AgentStep {
     activation: f64,
 }
 
-fn mean_activation(act: &[f64], muscles: &[usize]) -> f64 {
-    muscles.iter().map(|&m| act[m].abs()).sum::<f64>() / muscles.len().max(1) as f64
-}
-
 impl TrainingEnv {
     fn reset(&mut self, seed: u64) {
         match self {
@@ -215,7 +211,7 @@ impl TrainingEnv {
     }
 
     /// One control step with the rows of `actions` (one per robot).
-    fn step(&mut self, actions: &[Vec<f64>], muscles: &[usize]) -> Vec<AgentStep> {
+    fn step(&mut self, actions: &[Vec<f64>]) -> Vec<AgentStep> {
         match self {
             TrainingEnv::Single(env) => {
                 let tr = env.step(&actions[0]);
@@ -234,7 +230,7 @@ impl TrainingEnv {
                     rally_length: tr.success as u32,
                     dual: 0.0,
                     tracking,
-                    activation: mean_activation(&env.episode.robot.state.act, muscles),
+                    activation: tr.terms.effort,
                 }]
             }
             TrainingEnv::Rally(env) => {
@@ -242,8 +238,7 @@ impl TrainingEnv {
                 let length = trs.iter().map(|t| t.returns).sum();
                 let capped = env.capped();
                 trs.iter()
-                    .enumerate()
-                    .map(|(i, t)| AgentStep {
+                    .map(|t| AgentStep {
                         reward: t.step.reward,
                         done: t.step.done,
                         time_limit: t.step.done && capped,
@@ -252,7 +247,7 @@ impl TrainingEnv {
                         rally_length: length,
                         dual: t.step.terms.dual,
                         tracking: t.tracking,
-                        activation: mean_activation(&env.rally.arena.robots[i].state.act, muscles),
+                        activation: t.step.terms.effort,
                     })
                     .collect()
             }
@@ -306,7 +301,6 @@ pub struct Trainer {
     /// This process's time split.
     pub timing: Timing,
     slots: Vec<Slot>,
-    muscles: Vec<usize>,
     obs_dim: usize,
     act_dim: usize,
     /// Robots per environment.
@@ -423,7 +417,6 @@ impl Trainer {
             },
             timing: Timing::default(),
             slots,
-            muscles: model.muscles().map(|(i, _)| i).collect(),
             obs_dim,
             act_dim,
             agents,
@@ -513,7 +506,6 @@ impl Trainer {
         let std: Vec<f32> = self.net.std().map_err(e)?;
         let log_std = self.net.log_std.as_tensor().detach();
         let mut tracking = Vec::new();
-        let muscles = self.muscles.clone();
         let segment_start =
             self.progress.iteration - self.progress.iteration % p.checkpoint_every as u64;
         let (seed, scale) = (self.seed, p.reward_scale as f32);
@@ -547,7 +539,7 @@ impl Trainer {
                         .chunks(a_dim)
                         .map(|r| r.iter().map(|&x| (x as f64).clamp(-1.0, 1.0)).collect())
                         .collect();
-                    let steps = slot.env.step(&rows, &muscles);
+                    let steps = slot.env.step(&rows);
                     let done = steps.iter().any(|s| s.done);
                     let outs: Vec<StepOut> = steps
                         .iter()
