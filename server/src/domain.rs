@@ -1,6 +1,7 @@
 //! The server's vocabulary: the states of matches, SPRTs and workers and the kinds of agents, as
-//! enums that the store maps to the database's TEXT columns (sqlx) and the API to JSON (serde), each
-//! spelled once here — the `CHECK` constraints of `migrations/` list the same words.
+//! enums that the store maps to the database's TEXT columns (sqlx's Any driver, either engine) and
+//! the API to JSON (serde), each spelled once here — the `CHECK` constraints of `migrations/` list
+//! the same words.
 
 use serde::{Deserialize, Serialize};
 
@@ -9,9 +10,9 @@ use serde::{Deserialize, Serialize};
 macro_rules! words {
     ($(#[$doc:meta])* $name:ident { $($(#[$vdoc:meta])* $variant:ident = $word:literal),+ $(,)? }) => {
         $(#[$doc])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, sqlx::Type)]
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
         pub enum $name {
-            $($(#[$vdoc])* #[serde(rename = $word)] #[sqlx(rename = $word)] $variant),+
+            $($(#[$vdoc])* #[serde(rename = $word)] $variant),+
         }
 
         impl $name {
@@ -37,6 +38,35 @@ macro_rules! words {
                         [$($word),+].join(", ")
                     )),
                 }
+            }
+        }
+
+        impl sqlx::Type<sqlx::Any> for $name {
+            fn type_info() -> sqlx::any::AnyTypeInfo {
+                <str as sqlx::Type<sqlx::Any>>::type_info()
+            }
+
+            fn compatible(ty: &sqlx::any::AnyTypeInfo) -> bool {
+                <str as sqlx::Type<sqlx::Any>>::compatible(ty)
+            }
+        }
+
+        impl<'q> sqlx::Encode<'q, sqlx::Any> for $name {
+            fn encode_by_ref(
+                &self,
+                buf: &mut <sqlx::Any as sqlx::Database>::ArgumentBuffer<'q>,
+            ) -> Result<sqlx::encode::IsNull, sqlx::error::BoxDynError> {
+                <&str as sqlx::Encode<'q, sqlx::Any>>::encode_by_ref(&self.as_str(), buf)
+            }
+        }
+
+        impl<'r> sqlx::Decode<'r, sqlx::Any> for $name {
+            fn decode(
+                value: sqlx::any::AnyValueRef<'r>,
+            ) -> Result<$name, sqlx::error::BoxDynError> {
+                let word = <&str as sqlx::Decode<'r, sqlx::Any>>::decode(value)?;
+                word.parse::<$name>()
+                    .map_err(|e| format!("{} '{word}': {e}", stringify!($name)).into())
             }
         }
 

@@ -23,8 +23,8 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use crate::db::Pool;
 use serde::Deserialize;
-use sqlx::SqlitePool;
 use tokio::sync::Notify;
 
 /// The agents crate the server schedules matches with.
@@ -39,8 +39,8 @@ pub const DEFAULT_SETTINGS_TOML: &str = include_str!("../../config/default.toml"
 pub struct Settings {
     /// Listen address.
     pub addr: SocketAddr,
-    /// SQLite database file (created if missing).
-    pub db: PathBuf,
+    /// The store: an SQLite file (created if missing) or a `postgres://` URL (db::Location).
+    pub db: db::Location,
     /// Match workers (each a blocking thread).
     pub workers: usize,
     /// Keep scheduling matches between the agents with the fewest matches when the queue is empty.
@@ -228,7 +228,7 @@ pub struct AppState {
     /// This process's worker name (see [`Settings::worker`]).
     pub worker: Arc<String>,
     /// The database.
-    pub pool: SqlitePool,
+    pub pool: Pool,
     /// The robot model both sides play with.
     pub model: Arc<sim::model::Model>,
     /// Arena constants.

@@ -16,7 +16,8 @@ use super::CliError;
                   RALLY_ADMIN_TOKEN overrides its admin_token. Logs go to stderr (RUST_LOG=debug for more).\n\n\
                   On first start the built-in scripted agents are registered and, unless continuous mode is off,\n\
                   matches between them start at once: open the printed address to watch the leaderboard fill.\n\n\
-                  Example:\n  RALLY_ADMIN_TOKEN=secret rally serve --addr 127.0.0.1:8080 --db data/rally.db"
+                  Example:\n  RALLY_ADMIN_TOKEN=secret rally serve --addr 127.0.0.1:8080 --db data/rally.db\n  \
+                  rally serve --db postgres://rally:secret@db.lab:5432/rally --workers 0"
 )]
 pub struct ServeArgs {
     /// Settings file (TOML).
@@ -25,9 +26,11 @@ pub struct ServeArgs {
     /// Listen address (port 0 picks a free port).
     #[arg(long)]
     addr: Option<SocketAddr>,
-    /// SQLite database file (created with its directory if missing).
-    #[arg(long, value_name = "FILE")]
-    db: Option<PathBuf>,
+    /// The store: an SQLite file (created with its directory if missing; the default) or a
+    /// PostgreSQL 15 database, postgres://USER:PASS@HOST:PORT/DB (it must exist; the migrations are
+    /// applied at start).
+    #[arg(long, value_name = "FILE|URL")]
+    db: Option<server::db::Location>,
     /// Match workers in this process (0: serve the API alone; `rally worker` processes play).
     #[arg(long, value_parser = clap::value_parser!(u16).range(0..=64))]
     workers: Option<u16>,
@@ -93,7 +96,7 @@ pub fn run(args: &ServeArgs) -> Result<(), CliError> {
         println!("listening on http://{addr}");
         eprintln!(
             "rally serve: database {}, leaderboard at http://{addr}/, API at http://{addr}/api/v1{}",
-            db.display(),
+            db,
             if submissions { "" } else { " (submissions off: set RALLY_ADMIN_TOKEN)" }
         );
     }))?;

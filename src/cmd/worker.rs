@@ -29,9 +29,9 @@ pub struct WorkerArgs {
     /// Settings file (TOML), as for `rally serve`.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// The server's SQLite database file.
-    #[arg(long, value_name = "FILE")]
-    db: Option<PathBuf>,
+    /// The server's store: its SQLite file, or its postgres://USER:PASS@HOST:PORT/DB URL.
+    #[arg(long, value_name = "FILE|URL")]
+    db: Option<server::db::Location>,
     /// Matches this process plays at once.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64))]
     workers: u16,
@@ -45,14 +45,16 @@ pub struct WorkerArgs {
 pub fn run(args: &WorkerArgs) -> Result<(), CliError> {
     let mut settings = super::serve::load_settings(args.config.as_deref())?;
     if let Some(d) = &args.db {
-        if !d.exists() {
+        settings.db = d.clone();
+    }
+    if let server::db::Location::Sqlite(path) = &settings.db {
+        if !path.exists() {
             return Err(CliError::Usage(format!(
                 "{}: no such database (start `rally serve --db {}` first: it creates and migrates it)",
-                d.display(),
-                d.display()
+                path.display(),
+                path.display()
             )));
         }
-        settings.db = d.clone();
     }
     settings.workers = args.workers as usize;
     settings.continuous = false;
@@ -70,10 +72,7 @@ pub fn run(args: &WorkerArgs) -> Result<(), CliError> {
     let db = settings.db.clone();
     runtime.block_on(server::work(settings, |name| {
         println!("worker {name} ready");
-        eprintln!(
-            "rally worker {name}: playing queued matches from {}",
-            db.display()
-        );
+        eprintln!("rally worker {name}: playing queued matches from {}", db);
     }))?;
     Ok(())
 }

@@ -1,5 +1,9 @@
 //! What the server's integration tests share: a `rally serve` child process on a loopback port with
-//! a real SQLite file, raw HTTP/1.1 requests, polling and event streams.
+//! a real store, raw HTTP/1.1 requests, polling and event streams.
+//!
+//! The store is an SQLite file in the test's directory, or — when `RALLY_TEST_POSTGRES` holds the
+//! URL of a PostgreSQL server's admin database (`.ci/run` sets it for a second pass) — a fresh
+//! PostgreSQL database per test directory: every test that runs the server runs on both engines.
 #![allow(dead_code)] // each test file uses its own part
 
 use std::io::{BufRead, BufReader, Read, Write};
@@ -28,7 +32,39 @@ pub fn tempdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("rally-server-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
+    if let Some(admin) = postgres_admin() {
+        let name: String = format!("rally_{tag}_{}", std::process::id())
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() {
+                    c.to_ascii_lowercase()
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let url = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap()
+            .block_on(server::db::recreate_postgres_database(&admin, &name))
+            .unwrap_or_else(|e| panic!("a PostgreSQL database for {tag} on {admin}: {e}"));
+        std::fs::write(d.join("db.url"), url).unwrap();
+    }
     d
+}
+
+/// The PostgreSQL admin URL the tests run on (`RALLY_TEST_POSTGRES`), if any.
+pub fn postgres_admin() -> Option<String> {
+    std::env::var("RALLY_TEST_POSTGRES")
+        .ok()
+        .filter(|u| !u.is_empty())
+}
+
+/// The store of the tests in `dir`: its PostgreSQL database's URL, or the SQLite file `dir/rally.db`.
+pub fn db(dir: &Path) -> String {
+    std::fs::read_to_string(dir.join("db.url"))
+        .unwrap_or_else(|_| dir.join("rally.db").display().to_string())
 }
 
 pub fn start(dir: &Path, continuous: bool) -> Server {
@@ -51,7 +87,7 @@ pub fn write_config(dir: &Path, workers: usize, continuous: bool, extra: &str) -
             "addr = \"127.0.0.1:0\"\ndb = \"{}\"\nworkers = {workers}\ncontinuous = {continuous}\ncontinuous_rallies = 4\n\
              continuous_pause_s = 0.0\nmax_rallies = 1000\nqualification_episodes = 6\nmax_body_bytes = 65536\nadmin_token = \"\"\n\
              lease_s = 4.0\n{extra}",
-            dir.join("rally.db").display()
+            db(dir)
         ),
     )
     .unwrap();
@@ -88,8 +124,7 @@ pub fn start_worker(dir: &Path, name: &str) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
         .args(["worker", "--config"])
         .arg(dir.join("server.toml"))
-        .args(["--db"])
-        .arg(dir.join("rally.db"))
+        .args(["--db", &db(dir)])
         .args(["--name", name])
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())

@@ -3,7 +3,7 @@
 use super::*;
 
 /// Registers the scripted variants as built-in agents (idempotent).
-pub async fn register_builtins(pool: &SqlitePool) -> anyhow::Result<()> {
+pub async fn register_builtins(pool: &Pool) -> anyhow::Result<()> {
     for (name, _) in ::agents::scripted::variants() {
         sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin) VALUES ($1, 'scripted', $2, $3, 1) ON CONFLICT (name) DO NOTHING")
             .bind(name)
@@ -27,6 +27,7 @@ pub struct Agent {
     /// Hash of its spec.
     pub spec_hash: String,
     /// Registered by the server itself.
+    #[sqlx(try_from = "super::Flag")]
     pub builtin: bool,
     /// When registered.
     pub created_at: String,
@@ -44,14 +45,14 @@ pub(super) const AGENT_COLUMNS: &str =
     "id, name, kind, spec_hash, builtin, created_at, qual_episodes, hit_rate, success_rate, effort";
 
 /// All agents.
-pub async fn agents(pool: &SqlitePool) -> sqlx::Result<Vec<Agent>> {
+pub async fn agents(pool: &Pool) -> sqlx::Result<Vec<Agent>> {
     sqlx::query_as(&format!("SELECT {AGENT_COLUMNS} FROM agents ORDER BY id"))
         .fetch_all(pool)
         .await
 }
 
 /// One agent.
-pub async fn agent(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Agent>> {
+pub async fn agent(pool: &Pool, id: i64) -> sqlx::Result<Option<Agent>> {
     sqlx::query_as(&format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = $1"))
         .bind(id)
         .fetch_optional(pool)
@@ -59,7 +60,7 @@ pub async fn agent(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Agent>> {
 }
 
 /// The agent with a name.
-pub async fn agent_by_name(pool: &SqlitePool, name: &str) -> sqlx::Result<Option<Agent>> {
+pub async fn agent_by_name(pool: &Pool, name: &str) -> sqlx::Result<Option<Agent>> {
     sqlx::query_as(&format!(
         "SELECT {AGENT_COLUMNS} FROM agents WHERE name = $1"
     ))
@@ -69,7 +70,7 @@ pub async fn agent_by_name(pool: &SqlitePool, name: &str) -> sqlx::Result<Option
 }
 
 /// An agent's kind and spec (for playing it).
-pub async fn agent_spec(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<(AgentKind, String)>> {
+pub async fn agent_spec(pool: &Pool, id: i64) -> sqlx::Result<Option<(AgentKind, String)>> {
     sqlx::query_as("SELECT kind, spec FROM agents WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
@@ -78,7 +79,7 @@ pub async fn agent_spec(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<(Agen
 
 /// Inserts a checkpoint agent (submitted, or built in) with its qualification.
 pub async fn insert_checkpoint_agent(
-    pool: &SqlitePool,
+    pool: &Pool,
     name: &str,
     spec: &str,
     qual: (usize, f64, f64, f64),

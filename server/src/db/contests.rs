@@ -44,7 +44,7 @@ pub struct TournamentPlan<'a> {
 }
 
 /// Creates a tournament and queues all its matches, in one transaction; its id.
-pub async fn create_tournament(pool: &SqlitePool, plan: TournamentPlan<'_>) -> sqlx::Result<i64> {
+pub async fn create_tournament(pool: &Pool, plan: TournamentPlan<'_>) -> sqlx::Result<i64> {
     let TournamentPlan {
         kind,
         agents,
@@ -82,7 +82,7 @@ pub async fn create_tournament(pool: &SqlitePool, plan: TournamentPlan<'_>) -> s
 }
 
 /// One tournament.
-pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tournament>> {
+pub async fn tournament(pool: &Pool, id: i64) -> sqlx::Result<Option<Tournament>> {
     sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
@@ -90,7 +90,7 @@ pub async fn tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Tourn
 }
 
 /// Tournaments, newest first.
-pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tournament>> {
+pub async fn tournaments(pool: &Pool, limit: i64) -> sqlx::Result<Vec<Tournament>> {
     sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments ORDER BY id DESC LIMIT $1")
         .bind(limit)
         .fetch_all(pool)
@@ -98,7 +98,7 @@ pub async fn tournaments(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Tour
 }
 
 /// A tournament's matches in the order they were queued.
-pub async fn tournament_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
+pub async fn tournament_matches(pool: &Pool, id: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
         "SELECT {cols} FROM matches WHERE tournament_id = $1 ORDER BY id",
         cols = match_columns()
@@ -109,9 +109,10 @@ pub async fn tournament_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<
 }
 
 /// Cancels a tournament's queued and running matches; how many.
-pub async fn cancel_tournament(pool: &SqlitePool, id: i64) -> sqlx::Result<u64> {
-    let r = sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE tournament_id = $1 AND status IN ('queued', 'running')")
+pub async fn cancel_tournament(pool: &Pool, id: i64) -> sqlx::Result<u64> {
+    let r = sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = $2 WHERE tournament_id = $1 AND status IN ('queued', 'running')")
         .bind(id)
+        .bind(crate::db::now_text())
         .execute(pool)
         .await?;
     Ok(r.rows_affected())
@@ -177,7 +178,7 @@ pub struct SprtParams {
 
 /// Creates an SPRT and queues its first match, in one transaction; its id.
 pub async fn create_sprt(
-    pool: &SqlitePool,
+    pool: &Pool,
     a: &Agent,
     b: &Agent,
     p: SprtParams,
@@ -208,7 +209,7 @@ pub async fn create_sprt(
 }
 
 /// One SPRT.
-pub async fn sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Sprt>> {
+pub async fn sprt(pool: &Pool, id: i64) -> sqlx::Result<Option<Sprt>> {
     sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
         .bind(id)
         .fetch_optional(pool)
@@ -216,7 +217,7 @@ pub async fn sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Sprt>> {
 }
 
 /// SPRTs, newest first.
-pub async fn sprts(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
+pub async fn sprts(pool: &Pool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
     sqlx::query_as(&format!(
         "SELECT {SPRT_COLUMNS} FROM sprts ORDER BY id DESC LIMIT $1"
     ))
@@ -226,7 +227,7 @@ pub async fn sprts(pool: &SqlitePool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
 }
 
 /// An SPRT's matches in order.
-pub async fn sprt_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>> {
+pub async fn sprt_matches(pool: &Pool, id: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
         "SELECT {cols} FROM matches WHERE sprt_id = $1 ORDER BY id",
         cols = match_columns()
@@ -238,24 +239,28 @@ pub async fn sprt_matches(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Match>
 
 /// Ends a running SPRT with `status` and cancels its unfinished matches; false if it had ended.
 pub async fn end_sprt(
-    conn: &mut sqlx::SqliteConnection,
+    conn: &mut sqlx::AnyConnection,
     id: i64,
     status: SprtStatus,
 ) -> sqlx::Result<bool> {
-    let r = sqlx::query("UPDATE sprts SET status = $1, finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE id = $2 AND status = 'running'")
-        .bind(status)
+    let r = sqlx::query(
+        "UPDATE sprts SET status = $1, finished_at = $3 WHERE id = $2 AND status = 'running'",
+    )
+    .bind(status)
+    .bind(id)
+    .bind(crate::db::now_text())
+    .execute(&mut *conn)
+    .await?;
+    sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = $2 WHERE sprt_id = $1 AND status IN ('queued', 'running')")
         .bind(id)
-        .execute(&mut *conn)
-        .await?;
-    sqlx::query("UPDATE matches SET status = 'cancelled', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE sprt_id = $1 AND status IN ('queued', 'running')")
-        .bind(id)
+        .bind(crate::db::now_text())
         .execute(&mut *conn)
         .await?;
     Ok(r.rows_affected() == 1)
 }
 
 /// Cancels a running SPRT (one transaction); false if it had ended.
-pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
+pub async fn cancel_sprt(pool: &Pool, id: i64) -> sqlx::Result<bool> {
     let mut tx = pool.begin().await?;
     let ended = end_sprt(&mut tx, id, SprtStatus::Cancelled).await?;
     tx.commit().await?;
@@ -266,7 +271,7 @@ pub async fn cancel_sprt(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
 /// finished matches, lets `domain::sprt_step` decide, and writes the decision (and the next match,
 /// if it goes on). One match at a time, so the test's course depends only on its seeds. SPRT
 /// matches keep no replay frames (the replay endpoint re-simulates a rally on request).
-pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sqlx::Result<()> {
+pub(super) async fn sprt_step(conn: &mut sqlx::AnyConnection, id: i64) -> sqlx::Result<()> {
     let s: Option<Sprt> =
         sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
             .bind(id)
@@ -291,12 +296,13 @@ pub(super) async fn sprt_step(conn: &mut sqlx::SqliteConnection, id: i64) -> sql
         seed: s.seed as u64,
     };
     let step = crate::domain::sprt_step(&spec, &done);
-    sqlx::query("UPDATE sprts SET llr = $1, matches_done = $2, status = $3, finished_at = CASE WHEN $4 = 'running' THEN NULL ELSE CAST(CURRENT_TIMESTAMP AS TEXT) END WHERE id = $5")
+    sqlx::query("UPDATE sprts SET llr = $1, matches_done = $2, status = $3, finished_at = CASE WHEN $4 = 'running' THEN NULL ELSE $6 END WHERE id = $5")
         .bind(step.llr)
         .bind(step.matches_done as i64)
         .bind(step.status)
         .bind(step.status)
         .bind(id)
+        .bind(crate::db::now_text())
         .execute(&mut *conn)
         .await?;
     let Some(next) = step.next else {

@@ -22,12 +22,14 @@ pub struct Match {
     pub sim_version: String,
     /// Played (or queued) under another simulator version than this server's: its result stands,
     /// but it cannot be re-simulated or played here.
+    #[sqlx(try_from = "super::Flag")]
     pub outdated: bool,
     /// Hash of A's spec when queued.
     pub spec_hash_a: String,
     /// Hash of B's spec when queued.
     pub spec_hash_b: String,
     /// Replay frames are stored.
+    #[sqlx(try_from = "super::Flag")]
     pub keep_replay: bool,
     /// Where it is in its life.
     pub status: MatchStatus,
@@ -123,7 +125,7 @@ pub struct Origin {
 }
 
 /// Queues a match (on the pool or inside a transaction).
-pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
+pub async fn queue_match<'c, E: sqlx::AnyExecutor<'c>>(
     db: E,
     a: &Agent,
     b: &Agent,
@@ -152,7 +154,7 @@ pub async fn queue_match<'c, E: sqlx::SqliteExecutor<'c>>(
 }
 
 /// One match.
-pub async fn match_row(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Match>> {
+pub async fn match_row(pool: &Pool, id: i64) -> sqlx::Result<Option<Match>> {
     sqlx::query_as(&format!(
         "SELECT {} FROM matches WHERE id = $1",
         match_columns()
@@ -174,11 +176,7 @@ pub struct MatchFilter {
 }
 
 /// Matches, newest first, filtered.
-pub async fn matches(
-    pool: &SqlitePool,
-    filter: MatchFilter,
-    limit: i64,
-) -> sqlx::Result<Vec<Match>> {
+pub async fn matches(pool: &Pool, filter: MatchFilter, limit: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as(&format!(
         "SELECT {cols} FROM matches WHERE ($1 IS NULL OR agent_a = $1 OR agent_b = $1) AND ($2 IS NULL OR status = $2) AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4",
         cols = match_columns()
@@ -206,7 +204,7 @@ pub enum Stored {
 /// Stores a played match — rallies, crossings, replay, summary, ratings, SPRT step — and marks it
 /// done, in one transaction, under the worker's current lease (see [`workers`]).
 pub async fn store_result(
-    pool: &SqlitePool,
+    pool: &Pool,
     lease: &Lease,
     r: &MatchRecord,
     replay: &::agents::matchrun::Replay,
@@ -215,8 +213,9 @@ pub async fn store_result(
     // The first statement writes, so the transaction takes the write lock at once (waiting out other
     // writers) instead of upgrading a read lock later.
     let mut tx = pool.begin().await?;
+    serialise_writers(pool, &mut tx).await?;
     let marked: Option<(i64, i64, Option<i64>)> = sqlx::query_as(
-        "UPDATE matches SET status = 'done', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT), points_a = $1, points_b = $2, mean_rally_length = $3, max_rally_length = $4, in_box_fraction = $5, energy_distance = $6, drift_slope = $7, drift_json = $8 WHERE id = $9 AND status = 'running' AND worker = $10 AND attempts = $11 RETURNING agent_a, agent_b, sprt_id",
+        "UPDATE matches SET status = 'done', finished_at = $12, points_a = $1, points_b = $2, mean_rally_length = $3, max_rally_length = $4, in_box_fraction = $5, energy_distance = $6, drift_slope = $7, drift_json = $8 WHERE id = $9 AND status = 'running' AND worker = $10 AND attempts = $11 RETURNING agent_a, agent_b, sprt_id",
     )
     .bind(r.points[0] as i64)
     .bind(r.points[1] as i64)
@@ -229,6 +228,8 @@ pub async fn store_result(
     .bind(id)
     .bind(&lease.worker)
     .bind(lease.attempt)
+    .bind(crate::db::now_text())
+    .persistent(false) // NULL_F64: see below
     .fetch_optional(&mut *tx)
     .await?;
     let Some((agent_a, agent_b, sprt_id)) = marked else {
@@ -256,6 +257,10 @@ pub async fn store_result(
             .bind(d.energy_distance)
             .bind(d.drift_slope)
             .bind(serde_json::to_string(d).unwrap_or_default())
+            // NULL_F64: sqlx's Any driver sends a missing f64 to PostgreSQL as a float4 NULL, and a
+            // statement prepared (and cached) with that type then refuses the next real f64
+            // ("incorrect binary data format"): statements that may bind a None f64 are not cached.
+            .persistent(false)
             .execute(&mut *tx)
             .await?;
     }
@@ -319,7 +324,7 @@ pub async fn store_result(
 }
 
 /// Why a worker's write under its lease matched no row: the match was cancelled, or the lease lost.
-async fn lost_or_cancelled(pool: &SqlitePool, id: i64) -> sqlx::Result<Stored> {
+async fn lost_or_cancelled(pool: &Pool, id: i64) -> sqlx::Result<Stored> {
     let status: Option<(MatchStatus,)> = sqlx::query_as("SELECT status FROM matches WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
@@ -332,13 +337,15 @@ async fn lost_or_cancelled(pool: &SqlitePool, id: i64) -> sqlx::Result<Stored> {
 
 /// Marks a running match failed with a reason, under the worker's current lease; an SPRT it belonged
 /// to fails with it (one transaction).
-pub async fn fail(pool: &SqlitePool, lease: &Lease, error: &str) -> sqlx::Result<Stored> {
+pub async fn fail(pool: &Pool, lease: &Lease, error: &str) -> sqlx::Result<Stored> {
     let mut tx = pool.begin().await?;
-    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT), error = $1, lease_expires_ms = NULL WHERE id = $2 AND status = 'running' AND worker = $3 AND attempts = $4 RETURNING sprt_id")
+    serialise_writers(pool, &mut tx).await?;
+    let sprt: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'failed', finished_at = $5, error = $1, lease_expires_ms = NULL WHERE id = $2 AND status = 'running' AND worker = $3 AND attempts = $4 RETURNING sprt_id")
         .bind(error)
         .bind(lease.match_id)
         .bind(&lease.worker)
         .bind(lease.attempt)
+        .bind(crate::db::now_text())
         .fetch_optional(&mut *tx)
         .await?;
     let Some((sprt,)) = sprt else {
@@ -354,10 +361,11 @@ pub async fn fail(pool: &SqlitePool, lease: &Lease, error: &str) -> sqlx::Result
 
 /// Cancels a queued or running match (and the SPRT it belongs to: it cannot go on without it);
 /// false if it had already finished (or does not exist).
-pub async fn cancel(pool: &SqlitePool, id: i64) -> sqlx::Result<bool> {
+pub async fn cancel(pool: &Pool, id: i64) -> sqlx::Result<bool> {
     let mut tx = pool.begin().await?;
-    let r: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'cancelled', finished_at = CAST(CURRENT_TIMESTAMP AS TEXT) WHERE id = $1 AND status IN ('queued', 'running') RETURNING sprt_id")
+    let r: Option<(Option<i64>,)> = sqlx::query_as("UPDATE matches SET status = 'cancelled', finished_at = $2 WHERE id = $1 AND status IN ('queued', 'running') RETURNING sprt_id")
         .bind(id)
+        .bind(crate::db::now_text())
         .fetch_optional(&mut *tx)
         .await?;
     if let Some((Some(sprt),)) = r {
@@ -385,7 +393,7 @@ pub struct Rally {
 }
 
 /// A match's rallies.
-pub async fn rallies(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Rally>> {
+pub async fn rallies(pool: &Pool, id: i64) -> sqlx::Result<Vec<Rally>> {
     sqlx::query_as("SELECT idx, server, length, end_reason, failing_side, duration FROM rallies WHERE match_id = $1 ORDER BY idx")
         .bind(id)
         .fetch_all(pool)
@@ -393,7 +401,7 @@ pub async fn rallies(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<Rally>> {
 }
 
 /// A rally's replay frames (JSON), if stored.
-pub async fn replay(pool: &SqlitePool, id: i64, rally: i64) -> anyhow::Result<Option<String>> {
+pub async fn replay(pool: &Pool, id: i64, rally: i64) -> anyhow::Result<Option<String>> {
     let r: Option<(Vec<u8>,)> =
         sqlx::query_as("SELECT frames_gz FROM replays WHERE match_id = $1 AND rally_idx = $2")
             .bind(id)
@@ -416,7 +424,7 @@ fn gzip_json<T: Serialize>(value: &T) -> Vec<u8> {
 }
 
 /// The stored drift statistics of a match (JSON).
-pub async fn drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<String>> {
+pub async fn drift(pool: &Pool, id: i64) -> sqlx::Result<Option<String>> {
     let r: Option<(Option<String>,)> =
         sqlx::query_as("SELECT drift_json FROM matches WHERE id = $1")
             .bind(id)
@@ -431,10 +439,7 @@ mod tests {
 
     #[tokio::test]
     async fn a_match_of_another_simulator_version_says_it_is_outdated() {
-        let path =
-            std::env::temp_dir().join(format!("rally-db-outdated-{}.db", std::process::id()));
-        let _ = std::fs::remove_file(&path);
-        let pool = open(&path).await.unwrap();
+        let pool = test_store("outdated").await;
         register_builtins(&pool).await.unwrap();
         let all = agents(&pool).await.unwrap();
         let (a, b) = (&all[0], &all[1]);
@@ -460,6 +465,5 @@ mod tests {
         let listed = matches(&pool, MatchFilter::default(), 10).await.unwrap();
         assert_eq!(listed.iter().filter(|m| m.outdated).count(), 1);
         pool.close().await;
-        let _ = std::fs::remove_file(&path);
     }
 }

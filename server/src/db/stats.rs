@@ -17,7 +17,7 @@ impl From<&Agent> for crate::ratings::Entrant {
 }
 
 /// Every finished match's outcome.
-pub async fn outcomes(pool: &SqlitePool) -> sqlx::Result<Vec<Outcome>> {
+pub async fn outcomes(pool: &Pool) -> sqlx::Result<Vec<Outcome>> {
     sqlx::query_as(
         "SELECT agent_a, agent_b, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance FROM matches WHERE status = 'done' ORDER BY id",
     )
@@ -26,7 +26,7 @@ pub async fn outcomes(pool: &SqlitePool) -> sqlx::Result<Vec<Outcome>> {
 }
 
 /// The latest Glicko-2 rating and deviation of every agent that has one.
-pub async fn latest_glicko(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, f64, f64)>> {
+pub async fn latest_glicko(pool: &Pool) -> sqlx::Result<Vec<(i64, f64, f64)>> {
     sqlx::query_as(
         "SELECT agent_id, rating, deviation FROM rating_history h WHERE seq = (SELECT MAX(seq) FROM rating_history WHERE agent_id = h.agent_id)",
     )
@@ -36,7 +36,7 @@ pub async fn latest_glicko(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, f64, f64
 
 /// Per agent: mean over its finished matches of its own side's in-box fraction and serve → return
 /// energy distance (`match_drift`).
-pub async fn agent_drift(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<f64>, Option<f64>)>> {
+pub async fn agent_drift(pool: &Pool) -> sqlx::Result<Vec<(i64, Option<f64>, Option<f64>)>> {
     sqlx::query_as("SELECT agent_id, AVG(in_box_fraction), AVG(energy_distance) FROM match_drift GROUP BY agent_id")
         .fetch_all(pool)
         .await
@@ -57,11 +57,12 @@ pub struct AgentDrift {
     pub drift_slope: Option<f64>,
 }
 
-/// The drift summary of one agent.
-pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<AgentDrift> {
+/// The drift summary of one agent (PostgreSQL sums integers as NUMERIC, which sqlx's Any driver
+/// does not read: the sums are cast).
+pub async fn agent_drift_summary(pool: &Pool, agent: i64) -> sqlx::Result<AgentDrift> {
     sqlx::query_as(
-        "SELECT COUNT(*) AS matches, COALESCE(SUM(crossings), 0) AS crossings, \
-         SUM(in_box_fraction * crossings) / NULLIF(SUM(crossings), 0) AS in_box_fraction, \
+        "SELECT COUNT(*) AS matches, CAST(COALESCE(SUM(crossings), 0) AS BIGINT) AS crossings, \
+         SUM(in_box_fraction * crossings) / NULLIF(CAST(SUM(crossings) AS DOUBLE PRECISION), 0) AS in_box_fraction, \
          AVG(energy_distance) AS energy_distance, AVG(drift_slope) AS drift_slope \
          FROM match_drift WHERE agent_id = $1",
     )
@@ -72,7 +73,7 @@ pub async fn agent_drift_summary(pool: &SqlitePool, agent: i64) -> sqlx::Result<
 
 /// How many of the rallies of an agent's finished matches had each length: `(length, rallies)`,
 /// by length.
-pub async fn agent_rally_lengths(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<(i64, i64)>> {
+pub async fn agent_rally_lengths(pool: &Pool, agent: i64) -> sqlx::Result<Vec<(i64, i64)>> {
     sqlx::query_as(
         "SELECT r.length, COUNT(*) FROM rallies r JOIN matches m ON m.id = r.match_id \
          WHERE m.status = 'done' AND (m.agent_a = $1 OR m.agent_b = $2) GROUP BY r.length ORDER BY r.length",
@@ -97,8 +98,10 @@ pub struct AgentCrossing {
     /// Height, m.
     pub z: f64,
     /// Inside the serve box.
+    #[sqlx(try_from = "super::Flag")]
     pub in_box: bool,
     /// Extrapolated (the receiver hit before the plane).
+    #[sqlx(try_from = "super::Flag")]
     pub extrapolated: bool,
 }
 
@@ -106,7 +109,7 @@ pub struct AgentCrossing {
 /// serve of those rallies and the crossings its own returns produced (the same set as its side's
 /// drift statistics); at most `limit`, with the total.
 pub async fn agent_crossings(
-    pool: &SqlitePool,
+    pool: &Pool,
     agent: i64,
     limit: i64,
 ) -> sqlx::Result<(i64, Vec<AgentCrossing>)> {
@@ -147,7 +150,7 @@ pub struct RatingPoint {
 }
 
 /// An agent's rating history, oldest first.
-pub async fn rating_history(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<RatingPoint>> {
+pub async fn rating_history(pool: &Pool, agent: i64) -> sqlx::Result<Vec<RatingPoint>> {
     sqlx::query_as("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = $1 ORDER BY seq")
         .bind(agent)
         .fetch_all(pool)
@@ -155,7 +158,7 @@ pub async fn rating_history(pool: &SqlitePool, agent: i64) -> sqlx::Result<Vec<R
 }
 
 /// The drift statistics of one side of a match: (side, agent, JSON).
-pub async fn match_drift(pool: &SqlitePool, id: i64) -> sqlx::Result<Vec<(String, i64, String)>> {
+pub async fn match_drift(pool: &Pool, id: i64) -> sqlx::Result<Vec<(String, i64, String)>> {
     sqlx::query_as(
         "SELECT side, agent_id, drift_json FROM match_drift WHERE match_id = $1 ORDER BY side",
     )

@@ -8,8 +8,9 @@
 //! refused, and no match is ever stored twice. Times are Unix milliseconds from the processes'
 //! clocks: workers on several machines need clocks that agree to well within a lease.
 
+use super::Pool;
 use serde::Serialize;
-use sqlx::{FromRow, SqlitePool};
+use sqlx::FromRow;
 
 /// Now, in Unix milliseconds.
 pub fn now_ms() -> i64 {
@@ -55,7 +56,7 @@ pub struct Worker {
 /// Queues again every running match whose lease ran out before `now` (its worker died, hung or lost
 /// the database), and any running match without a lease (left by a version before leases). Returns
 /// how many.
-pub async fn requeue_expired(pool: &SqlitePool, now: i64) -> sqlx::Result<u64> {
+pub async fn requeue_expired(pool: &Pool, now: i64) -> sqlx::Result<u64> {
     let r = sqlx::query(
         "UPDATE matches SET status = 'queued', started_at = NULL, worker = NULL, lease_expires_ms = NULL \
          WHERE status = 'running' AND (lease_expires_ms IS NULL OR lease_expires_ms < $1)",
@@ -68,7 +69,7 @@ pub async fn requeue_expired(pool: &SqlitePool, now: i64) -> sqlx::Result<u64> {
 
 /// Queues again every running match held by `worker` (a worker starting under a name gives back what
 /// a previous process of that name held: it holds nothing yet). Returns how many.
-pub async fn requeue_held_by(pool: &SqlitePool, worker: &str) -> sqlx::Result<u64> {
+pub async fn requeue_held_by(pool: &Pool, worker: &str) -> sqlx::Result<u64> {
     let r = sqlx::query(
         "UPDATE matches SET status = 'queued', started_at = NULL, worker = NULL, lease_expires_ms = NULL \
          WHERE status = 'running' AND worker = $1",
@@ -80,22 +81,31 @@ pub async fn requeue_held_by(pool: &SqlitePool, worker: &str) -> sqlx::Result<u6
 }
 
 /// Claims the oldest queued match for `worker` with a lease of `lease_ms` (queued → running) in one
-/// statement, so two workers never take the same match; expired leases are queued again first.
+/// statement (SQLite's single `UPDATE … RETURNING`; on PostgreSQL with `FOR UPDATE SKIP LOCKED`), so
+/// two workers never take the same match; expired leases are queued again first.
 pub async fn claim(
-    pool: &SqlitePool,
+    pool: &Pool,
     worker: &str,
     lease_ms: i64,
 ) -> sqlx::Result<Option<(super::Match, Lease)>> {
     let now = now_ms();
     requeue_expired(pool, now).await?;
-    let row: Option<(i64, i64)> = sqlx::query_as(
-        "UPDATE matches SET status = 'running', started_at = CAST(CURRENT_TIMESTAMP AS TEXT), worker = $1, \
+    // The oldest queued match, taken in one statement. On PostgreSQL, `FOR UPDATE SKIP LOCKED` lets
+    // concurrent claims pass over a row another worker is taking (without it, the loser of a race
+    // would wait for that row and then find it running: no match, though others are queued).
+    let skip_locked = match super::Engine::of(pool) {
+        super::Engine::Postgres => " FOR UPDATE SKIP LOCKED",
+        super::Engine::Sqlite => "",
+    };
+    let row: Option<(i64, i64)> = sqlx::query_as(&format!(
+        "UPDATE matches SET status = 'running', started_at = $3, worker = $1, \
          lease_expires_ms = $2, attempts = attempts + 1 \
-         WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1) AND status = 'queued' \
-         RETURNING id, attempts",
-    )
+         WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1{skip_locked}) \
+         AND status = 'queued' RETURNING id, attempts",
+    ))
     .bind(worker)
     .bind(now + lease_ms)
+    .bind(crate::db::now_text())
     .fetch_optional(pool)
     .await?;
     let Some((id, attempt)) = row else {
@@ -118,7 +128,7 @@ pub async fn claim(
 /// refusing when a running worker of that name beat less than `lease_ms` ago: two live processes
 /// must not share a name. Gives back what a previous process of the name held.
 pub async fn register(
-    pool: &SqlitePool,
+    pool: &Pool,
     name: &str,
     host: &str,
     pid: u32,
@@ -161,7 +171,7 @@ pub async fn register(
 
 /// The heartbeat of worker `name`: its row's time, and every lease it holds renewed to `lease_ms`
 /// from now (one transaction). Returns the number of leases renewed.
-pub async fn heartbeat(pool: &SqlitePool, name: &str, lease_ms: i64) -> sqlx::Result<u64> {
+pub async fn heartbeat(pool: &Pool, name: &str, lease_ms: i64) -> sqlx::Result<u64> {
     let now = now_ms();
     let mut tx = pool.begin().await?;
     let renewed = sqlx::query(
@@ -182,7 +192,7 @@ pub async fn heartbeat(pool: &SqlitePool, name: &str, lease_ms: i64) -> sqlx::Re
 }
 
 /// Marks worker `name` stopped (it finished its matches and exits).
-pub async fn stopped(pool: &SqlitePool, name: &str) -> sqlx::Result<()> {
+pub async fn stopped(pool: &Pool, name: &str) -> sqlx::Result<()> {
     sqlx::query("UPDATE workers SET status = 'stopped', heartbeat_ms = $1 WHERE name = $2")
         .bind(now_ms())
         .bind(name)
@@ -192,14 +202,14 @@ pub async fn stopped(pool: &SqlitePool, name: &str) -> sqlx::Result<()> {
 }
 
 /// Every worker that ever registered, the most recent heartbeat first.
-pub async fn workers(pool: &SqlitePool) -> sqlx::Result<Vec<Worker>> {
+pub async fn workers(pool: &Pool) -> sqlx::Result<Vec<Worker>> {
     sqlx::query_as("SELECT name, host, pid, slots, started_ms, heartbeat_ms, matches_played, status FROM workers ORDER BY heartbeat_ms DESC, name")
         .fetch_all(pool)
         .await
 }
 
 /// The running matches (id and lease holder).
-pub async fn running(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<String>)>> {
+pub async fn running(pool: &Pool) -> sqlx::Result<Vec<(i64, Option<String>)>> {
     sqlx::query_as("SELECT id, worker FROM matches WHERE status = 'running' ORDER BY id")
         .fetch_all(pool)
         .await
@@ -209,7 +219,7 @@ pub async fn running(pool: &SqlitePool) -> sqlx::Result<Vec<(i64, Option<String>
 /// match with an id above `after` (new since its last look, finished or not), with status and
 /// worker, by id.
 pub async fn watched(
-    pool: &SqlitePool,
+    pool: &Pool,
     after: i64,
 ) -> sqlx::Result<Vec<(i64, crate::domain::MatchStatus, Option<String>)>> {
     sqlx::query_as(
@@ -222,7 +232,7 @@ pub async fn watched(
 }
 
 /// The highest match id so far (0 when there is none).
-pub async fn last_match_id(pool: &SqlitePool) -> sqlx::Result<i64> {
+pub async fn last_match_id(pool: &Pool) -> sqlx::Result<i64> {
     sqlx::query_scalar("SELECT COALESCE(MAX(id), 0) FROM matches")
         .fetch_one(pool)
         .await
@@ -230,7 +240,7 @@ pub async fn last_match_id(pool: &SqlitePool) -> sqlx::Result<i64> {
 
 /// A match's status and worker now, if it exists.
 pub async fn status_of(
-    pool: &SqlitePool,
+    pool: &Pool,
     id: i64,
 ) -> sqlx::Result<Option<(crate::domain::MatchStatus, Option<String>)>> {
     sqlx::query_as("SELECT status, worker FROM matches WHERE id = $1")
@@ -246,9 +256,7 @@ mod tests {
 
     #[tokio::test]
     async fn a_result_reported_after_the_lease_ran_out_is_refused_and_the_new_holder_stores_once() {
-        let path = std::env::temp_dir().join(format!("rally-db-lease-{}.db", std::process::id()));
-        let _ = std::fs::remove_file(&path);
-        let pool = db::open(&path).await.unwrap();
+        let pool = db::test_store("lease").await;
         db::register_builtins(&pool).await.unwrap();
         let all = db::agents(&pool).await.unwrap();
         let id = db::queue_match(&pool, &all[0], &all[1], 1, 1, false, db::Origin::default())
@@ -328,6 +336,5 @@ mod tests {
             .collect();
         assert!(played.contains(&("new".into(), 1)) && played.contains(&("old".into(), 0)));
         pool.close().await;
-        let _ = std::fs::remove_file(&path);
     }
 }

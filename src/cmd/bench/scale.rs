@@ -30,7 +30,7 @@ fn overhead(dir: &std::path::Path) -> anyhow::Result<Value> {
         .enable_all()
         .build()?;
     runtime.block_on(async {
-        let pool = server::db::open(&dir.join("overhead.db")).await?;
+        let pool = server::db::open(&server::db::Location::Sqlite(dir.join("overhead.db"))).await?;
         server::db::register_builtins(&pool).await?;
         let all = server::db::agents(&pool).await?;
         anyhow::ensure!(all.len() >= 2, "fewer than two built-in agents");
