@@ -1,6 +1,9 @@
-//! Scale-out: `rally serve --workers 0` (the API alone) and `rally worker` processes on one SQLite
-//! file. Workers are killed with -9 and stopped with SIGTERM in the middle of matches: every match is
+//! Scale-out: `rally serve --workers 0` (the API alone) and `rally worker` processes on one store.
+//! Workers are killed with -9 and stopped with SIGTERM in the middle of matches: every match is
 //! played and stored exactly once, with the result `rally match` gives for the same seed.
+//!
+//! On SQLite (one file): 12 matches, two workers at a time (a third replaces the two). On
+//! PostgreSQL (`RALLY_TEST_POSTGRES`, CI's second pass): 30 matches, three workers from the start.
 
 use std::io::BufRead;
 use std::process::Command;
@@ -11,7 +14,6 @@ use serde_json::{json, Value};
 mod common;
 use common::*;
 
-const MATCHES: i64 = 12;
 const RALLIES: i64 = 6;
 
 /// The matches `name` holds the lease of, per `GET /workers`.
@@ -69,7 +71,9 @@ fn played_alone(a: &str, b: &str, seed: i64) -> (Value, Vec<i64>) {
 
 #[test]
 fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
-    let dir = tempdir("workers-sqlite");
+    let postgres = postgres_admin().is_some();
+    let matches: i64 = if postgres { 30 } else { 12 };
+    let dir = tempdir("workers");
     let srv = start_serve(&dir, 0, false, "builtin_checkpoints = \"\"\n");
     let a = srv.addr.as_str();
     let pairs = [
@@ -77,7 +81,7 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
         ("scripted-soft", "scripted"),
     ];
     let mut ids = Vec::new();
-    for k in 0..MATCHES {
+    for k in 0..matches {
         let (x, y) = pairs[k as usize % 2];
         let (code, m) = call(
             a,
@@ -98,6 +102,7 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
     let (mut events, _) = subscribe(a, "/api/v1/events");
     let mut w1 = start_worker(&dir, "w1");
     let mut w2 = start_worker(&dir, "w2");
+    let w3 = postgres.then(|| start_worker(&dir, "w3"));
     // A second live process under a taken name is refused, and changes nothing.
     let dup = Command::new(env!("CARGO_BIN_EXE_rally"))
         .args(["worker", "--config"])
@@ -127,8 +132,8 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
         "{m}"
     );
 
-    // A third worker plays the rest, the killed worker's match once its lease is gone.
-    let _w3 = start_worker(&dir, "w3");
+    // The third worker plays the rest, the killed worker's match once its lease is gone.
+    let _w3 = w3.unwrap_or_else(|| start_worker(&dir, "w3"));
     let mut done = Vec::new();
     for &id in &ids {
         done.push(wait_for(a, id, "done", Duration::from_secs(600)));
@@ -136,7 +141,7 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
     let (_, list) = call(a, "GET", "/api/v1/matches?limit=1000", None, None);
     assert_eq!(
         list["matches"].as_array().unwrap().len() as i64,
-        MATCHES,
+        matches,
         "no duplicate match"
     );
     for m in &done {
@@ -176,7 +181,7 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
         .iter()
         .map(|x| x["matches_played"].as_i64().unwrap())
         .sum();
-    assert_eq!(played, MATCHES, "{w}");
+    assert_eq!(played, matches, "{w}");
     let get = |n: &str| workers.iter().find(|x| x["name"] == n).unwrap().clone();
     assert_eq!(get("w2")["status"], "stopped", "{w}");
     assert_eq!(get("w1")["alive"], false, "{w}");
