@@ -40,8 +40,9 @@ pub enum Target {
     /// The tournament server from outside: matches per hour, leaderboard requests per second and
     /// p99 latency (next to /healthz) while two matches run, peak memory.
     Server,
-    /// Scale-out on SQLite: the store's claim + store overhead per match, and matches per hour with
-    /// the server's own worker next to 1, 2 and 4 `rally worker` processes on one database file.
+    /// Scale-out, per engine (SQLite; PostgreSQL too with --postgres): the store's claim + store
+    /// overhead per match, matches per hour with the server's own worker next to 1, 2 and 4
+    /// `rally worker` processes on one store, and leaderboard requests/s and p99.
     Scale,
 }
 
@@ -69,6 +70,10 @@ pub struct BenchArgs {
     /// Concurrent keep-alive clients (`server` only).
     #[arg(long, default_value = "8", value_parser = clap::value_parser!(u16).range(1..=256))]
     clients: u16,
+    /// `scale` only: also measure PostgreSQL, on this server (an admin URL, e.g.
+    /// postgres://postgres@127.0.0.1:5432/postgres: each measurement creates a fresh database).
+    #[arg(long, value_name = "URL", env = "RALLY_BENCH_POSTGRES")]
+    postgres: Option<String>,
 }
 
 /// Runs the ball-world benchmark for about `seconds`; returns physics steps per second.
@@ -357,37 +362,51 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
             Ok(())
         }
         Target::Scale => {
-            let r = scale::scale_bench()?;
+            let r = scale::scale_bench(args.postgres.as_deref(), args.seconds)?;
             if args.json {
                 println!("{r}");
             } else {
-                let o = &r["overhead"];
                 let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-                println!("scale-out on SQLite ({} cores):", r["cores"]);
-                for k in ["claim", "store", "claim_and_store"] {
-                    println!(
-                        "  {k:<16} {:>7.2} ms mean   p50 {:.2} ms   p99 {:.2} ms   ({} matches)",
-                        f(&o[k], "mean_ms"),
-                        f(&o[k], "p50_ms"),
-                        f(&o[k], "p99_ms"),
-                        o["matches"]
-                    );
-                }
                 println!(
-                    "  matches/h ({} matches of {} rallies, scripted built-ins):",
-                    r["throughput_matches"], r["throughput_rallies"]
+                    "scale-out ({} cores; {} matches of {} rallies per throughput figure, scripted built-ins):",
+                    r["cores"], r["throughput_matches"], r["throughput_rallies"]
                 );
-                let serve = f(&r, "serve_one_worker_matches_per_hour");
-                println!("    rally serve, 1 worker of its own       {serve:>8.0}");
-                for p in r["worker_processes"].as_array().into_iter().flatten() {
+                for e in r["engines"].as_array().into_iter().flatten() {
+                    let o = &e["overhead"];
+                    println!("{}:", e["engine"].as_str().unwrap_or("?"));
+                    for k in ["claim", "store", "claim_and_store"] {
+                        println!(
+                            "  {k:<16} {:>7.2} ms mean   p50 {:.2} ms   p99 {:.2} ms   ({} matches)",
+                            f(&o[k], "mean_ms"),
+                            f(&o[k], "p50_ms"),
+                            f(&o[k], "p99_ms"),
+                            o["matches"]
+                        );
+                    }
+                    let serve = f(e, "serve_one_worker_matches_per_hour");
                     println!(
-                        "    rally serve --workers 0 + {} x worker  {:>8.0}   ({:.2}x)",
-                        p["worker_processes"],
-                        f(p, "matches_per_hour"),
-                        f(p, "vs_serve")
+                        "  matches/h: rally serve, 1 worker of its own       {serve:>8.0}   ({:.2}x SQLite's)",
+                        f(e, "serve_vs_sqlite_serve")
+                    );
+                    for p in e["worker_processes"].as_array().into_iter().flatten() {
+                        println!(
+                            "  matches/h: rally serve --workers 0 + {} x worker  {:>8.0}   ({:.2}x SQLite's rally serve)",
+                            p["worker_processes"],
+                            f(p, "matches_per_hour"),
+                            f(p, "vs_sqlite_serve")
+                        );
+                    }
+                    let b = &e["leaderboard"];
+                    println!(
+                        "  leaderboard      {:>7.0} requests/s   p50 {:.2} ms   p99 {:.2} ms   (8 clients)",
+                        f(b, "requests_per_second"),
+                        f(b, "p50_ms"),
+                        f(b, "p99_ms")
                     );
                 }
-                println!("  PostgreSQL: {}", r["postgres"].as_str().unwrap_or(""));
+                if r["postgres"] != "measured" {
+                    println!("PostgreSQL: {}", r["postgres"].as_str().unwrap_or(""));
+                }
             }
             Ok(())
         }

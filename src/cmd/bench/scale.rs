@@ -1,7 +1,8 @@
-//! `rally bench scale`: what scale-out costs and gives on the embedded SQLite (DESIGN §12) — the
-//! store's overhead per match (claim, then store a played result under the lease), and matches per
-//! hour with the server's own worker next to 1, 2 and 4 `rally worker` processes on one file.
-//! PostgreSQL is not measured: the store does not speak it yet.
+//! `rally bench scale`: what scale-out costs and gives (DESIGN §12), on the embedded SQLite and, given
+//! a PostgreSQL server (`--postgres`), on PostgreSQL in the same run — per engine: the store's
+//! overhead per match (claim, then store a played result under the lease), matches per hour with
+//! the server's own worker and with 1, 2 and 4 `rally worker` processes, and the leaderboard's
+//! requests per second and p99 once those matches are stored.
 
 use std::io::BufRead;
 use std::process::{Child, Command, Stdio};
@@ -23,14 +24,54 @@ fn summary(mut xs: Vec<f64>) -> Value {
     json!({"mean_ms": xs.iter().sum::<f64>() / xs.len() as f64, "p50_ms": q(0.5), "p99_ms": q(0.99)})
 }
 
-/// Claim and store `OVERHEAD_MATCHES` one-rally matches in a fresh database (the same played
-/// record each time: the simulation is not what is measured).
-fn overhead(dir: &std::path::Path) -> anyhow::Result<Value> {
+/// Where each measurement keeps its fresh store: files in a directory, or databases on a
+/// PostgreSQL server.
+enum Stores<'a> {
+    Sqlite(&'a std::path::Path),
+    Postgres(&'a str),
+}
+
+impl Stores<'_> {
+    fn engine(&self) -> &'static str {
+        match self {
+            Stores::Sqlite(_) => "sqlite",
+            Stores::Postgres(_) => "postgres",
+        }
+    }
+
+    /// A fresh, empty store named `tag`.
+    fn fresh(&self, tag: &str) -> anyhow::Result<server::db::Location> {
+        Ok(match self {
+            Stores::Sqlite(dir) => server::db::Location::Sqlite(dir.join(format!("{tag}.db"))),
+            Stores::Postgres(admin) => {
+                let name = format!("rally_bench_{}", tag.replace('-', "_"));
+                let url = tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .build()?
+                    .block_on(server::db::recreate_postgres_database(admin, &name))?;
+                server::db::Location::Postgres(url)
+            }
+        })
+    }
+
+    /// The store's text for `--db`.
+    fn arg(location: &server::db::Location) -> String {
+        match location {
+            server::db::Location::Sqlite(p) => p.display().to_string(),
+            server::db::Location::Postgres(url) => url.clone(),
+        }
+    }
+}
+
+/// Claim and store `OVERHEAD_MATCHES` one-rally matches in a fresh store (the same played record
+/// each time: the simulation is not what is measured).
+fn overhead(stores: &Stores) -> anyhow::Result<Value> {
+    let location = stores.fresh("overhead")?;
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
     runtime.block_on(async {
-        let pool = server::db::open(&server::db::Location::Sqlite(dir.join("overhead.db"))).await?;
+        let pool = server::db::open(&location).await?;
         server::db::register_builtins(&pool).await?;
         let all = server::db::agents(&pool).await?;
         anyhow::ensure!(all.len() >= 2, "fewer than two built-in agents");
@@ -98,18 +139,26 @@ fn spawn(args: &[&str]) -> anyhow::Result<(Kill, String)> {
     Ok((Kill(child), line.trim().to_string()))
 }
 
-/// Matches per hour with `in_server` workers in `rally serve` and `processes` `rally worker`s.
-fn throughput(dir: &std::path::Path, in_server: usize, processes: usize) -> anyhow::Result<f64> {
+/// Matches per hour with `in_server` workers in `rally serve` and `processes` `rally worker`s on a
+/// fresh store; with `board`, then the leaderboard's requests per second and p99 (8 keep-alive
+/// clients for `board` seconds) on the stored matches.
+fn throughput(
+    dir: &std::path::Path,
+    stores: &Stores,
+    in_server: usize,
+    processes: usize,
+    board: Option<f64>,
+) -> anyhow::Result<(f64, Option<Value>)> {
     let tag = format!("s{in_server}-w{processes}");
-    let db = dir.join(format!("{tag}.db"));
-    let config = dir.join(format!("{tag}.toml"));
+    let db = Stores::arg(&stores.fresh(&tag)?);
+    let config = dir.join(format!("{}-{tag}.toml", stores.engine()));
     let settings = server::DEFAULT_SETTINGS_TOML
         .lines()
         .filter(|l| !l.starts_with("builtin_checkpoints"))
         .collect::<Vec<_>>()
         .join("\n");
     std::fs::write(&config, format!("{settings}\nbuiltin_checkpoints = \"\"\n"))?;
-    let (config, db) = (config.display().to_string(), db.display().to_string());
+    let config = config.display().to_string();
     let workers = in_server.to_string();
     let (_server, line) = spawn(&[
         "serve",
@@ -159,32 +208,71 @@ fn throughput(dir: &std::path::Path, in_server: usize, processes: usize) -> anyh
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    Ok(ids.len() as f64 / t0.elapsed().as_secs_f64() * 3600.0)
+    let per_hour = ids.len() as f64 / t0.elapsed().as_secs_f64() * 3600.0;
+    let board = match board {
+        Some(seconds) => {
+            let (rps, p50, p99) = super::load(&addr, "/api/v1/leaderboard", 8, seconds)?;
+            Some(json!({"requests_per_second": rps, "p50_ms": p50 * 1e3, "p99_ms": p99 * 1e3}))
+        }
+        None => None,
+    };
+    Ok((per_hour, board))
 }
 
-/// The whole benchmark, as JSON.
-pub fn scale_bench() -> anyhow::Result<Value> {
+/// One engine's figures.
+fn engine_bench(
+    dir: &std::path::Path,
+    stores: &Stores,
+    board_seconds: f64,
+) -> anyhow::Result<Value> {
+    let overhead = overhead(stores)?;
+    let (serve, board) = throughput(dir, stores, 1, 0, Some(board_seconds))?;
+    let mut processes = Vec::new();
+    for n in [1, 2, 4] {
+        let (per_hour, _) = throughput(dir, stores, 0, n, None)?;
+        processes.push(json!({"worker_processes": n, "matches_per_hour": per_hour, "vs_serve": per_hour / serve}));
+    }
+    Ok(json!({
+        "engine": stores.engine(),
+        "overhead": overhead,
+        "serve_one_worker_matches_per_hour": serve,
+        "worker_processes": processes,
+        "leaderboard": board,
+    }))
+}
+
+/// The whole benchmark, as JSON: SQLite, and PostgreSQL when `postgres` (an admin URL of a server
+/// where databases may be created: each measurement gets a fresh one) is given.
+pub fn scale_bench(postgres: Option<&str>, board_seconds: f64) -> anyhow::Result<Value> {
     let dir = std::env::temp_dir().join(format!("rally-bench-scale-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir)?;
     let result = (|| -> anyhow::Result<Value> {
-        let overhead = overhead(&dir)?;
-        let serve = throughput(&dir, 1, 0)?;
-        let mut processes = Vec::new();
-        for n in [1, 2, 4] {
-            let per_hour = throughput(&dir, 0, n)?;
-            processes.push(json!({"worker_processes": n, "matches_per_hour": per_hour, "vs_serve": per_hour / serve}));
+        let mut engines = vec![engine_bench(&dir, &Stores::Sqlite(&dir), board_seconds)?];
+        if let Some(admin) = postgres {
+            engines.push(engine_bench(&dir, &Stores::Postgres(admin), board_seconds)?);
+        }
+        // Every figure also next to one `rally serve` on SQLite, the default set-up.
+        let reference = engines[0]["serve_one_worker_matches_per_hour"]
+            .as_f64()
+            .unwrap_or(f64::NAN);
+        for e in &mut engines {
+            let serve = e["serve_one_worker_matches_per_hour"]
+                .as_f64()
+                .unwrap_or(f64::NAN);
+            e["serve_vs_sqlite_serve"] = json!(serve / reference);
+            for p in e["worker_processes"].as_array_mut().into_iter().flatten() {
+                let m = p["matches_per_hour"].as_f64().unwrap_or(f64::NAN);
+                p["vs_sqlite_serve"] = json!(m / reference);
+            }
         }
         Ok(json!({
             "target": "scale",
-            "engine": "sqlite",
             "cores": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
-            "overhead": overhead,
             "throughput_matches": THROUGHPUT_MATCHES,
             "throughput_rallies": THROUGHPUT_RALLIES,
-            "serve_one_worker_matches_per_hour": serve,
-            "worker_processes": processes,
-            "postgres": "not measured: the store speaks SQLite only so far",
+            "engines": engines,
+            "postgres": if postgres.is_some() { "measured" } else { "not measured: give --postgres postgres://USER@HOST:PORT/postgres (a server where this user may create databases)" },
         }))
     })();
     let _ = std::fs::remove_dir_all(&dir);
