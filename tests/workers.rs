@@ -204,3 +204,108 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
         assert_eq!(stored, lengths, "{m}");
     }
 }
+
+/// A tournament and an SPRT, queued on `addr`; returns their ids.
+fn queue_contests(addr: &str) -> (i64, i64) {
+    let (code, t) = call(
+        addr,
+        "POST",
+        "/api/v1/tournaments",
+        Some(
+            &json!({"kind": "round_robin", "agents": ["scripted", "scripted-drive", "scripted-soft"],
+                     "rallies_per_match": 4, "rounds": 2, "seed": 70}),
+        ),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 202, "{t}");
+    let (code, p) = call(
+        addr,
+        "POST",
+        "/api/v1/sprt",
+        Some(
+            &json!({"a": "scripted", "b": "scripted-soft", "rallies_per_match": 4,
+                     "max_matches": 5, "elo1": 400, "seed": 90}),
+        ),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 202, "{p}");
+    (t["id"].as_i64().unwrap(), p["id"].as_i64().unwrap())
+}
+
+/// What a finished tournament and SPRT decided: the standings, every match's (seed, a, b, points),
+/// and the SPRT's status, LLR, match count and matches.
+fn contest_outcome(addr: &str, tid: i64, pid: i64) -> Value {
+    let t = poll(
+        addr,
+        &format!("/api/v1/tournaments/{tid}"),
+        Duration::from_secs(600),
+        |v| v["progress"]["state"] == "finished",
+    );
+    let p = poll(
+        addr,
+        &format!("/api/v1/sprt/{pid}"),
+        Duration::from_secs(600),
+        |v| v["status"] != "running",
+    );
+    let games = |v: &Value| -> Vec<Value> {
+        v["matches"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| {
+                json!([
+                    m["status"],
+                    m["seed"],
+                    m["agent_a"],
+                    m["agent_b"],
+                    m["points_a"],
+                    m["points_b"]
+                ])
+            })
+            .collect()
+    };
+    json!({
+        "standings": t["standings"],
+        "tournament": games(&t),
+        "sprt": [p["status"], p["llr"], p["matches_done"]],
+        "sprt_matches": games(&p),
+    })
+}
+
+#[test]
+fn tournaments_and_sprts_decide_the_same_with_two_worker_processes_as_with_one_worker() {
+    // The reference: one server playing with its own single worker.
+    let one = tempdir("contests-one");
+    let srv = start_serve(&one, 1, false, "builtin_checkpoints = \"\"\n");
+    let (tid, pid) = queue_contests(&srv.addr);
+    let reference = contest_outcome(&srv.addr, tid, pid);
+    assert_eq!(reference["tournament"].as_array().unwrap().len(), 6);
+    assert!(reference["sprt"][2].as_i64().unwrap() >= 1, "{reference}");
+    drop(srv);
+
+    // The API alone and two worker processes on one store, one of them stopped half way.
+    let dir = tempdir("contests-two");
+    let srv = start_serve(&dir, 0, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    let (tid, pid) = queue_contests(a);
+    let w1 = start_worker(&dir, "w1");
+    let mut w2 = start_worker(&dir, "w2");
+    let _ = poll(
+        a,
+        &format!("/api/v1/tournaments/{tid}"),
+        Duration::from_secs(600),
+        |v| v["progress"]["done"].as_i64().unwrap_or(0) >= 3,
+    );
+    assert!(terminate(&mut w2).success());
+    let outcome = contest_outcome(a, tid, pid);
+    assert_eq!(outcome, reference);
+    let (_, all) = call(a, "GET", "/api/v1/matches?limit=1000", None, None);
+    let n = reference["tournament"].as_array().unwrap().len()
+        + reference["sprt_matches"].as_array().unwrap().len();
+    assert_eq!(
+        all["matches"].as_array().unwrap().len(),
+        n,
+        "no stray match"
+    );
+    drop(w1);
+}
