@@ -18,6 +18,7 @@ pub mod ratings;
 pub mod replay;
 pub mod scheduler;
 pub mod tournament;
+pub mod wire;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;

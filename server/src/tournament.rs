@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::db::{Match, MatchStatus};
 
@@ -52,8 +52,19 @@ pub fn pairs(kind: Kind, n: usize, rounds: u32) -> Vec<(usize, usize)> {
         .collect()
 }
 
+/// Whether a tournament still has matches to play.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProgressState {
+    /// Some of its matches are queued or running.
+    #[default]
+    Running,
+    /// Every match ended (done, failed or cancelled).
+    Finished,
+}
+
 /// How far a tournament has got.
-#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct Progress {
     /// Matches in it.
     pub total: usize,
@@ -70,11 +81,11 @@ pub struct Progress {
     /// Finished (done, failed or cancelled) / total.
     pub fraction: f64,
     /// "running" while any match is queued or running, else "finished".
-    pub state: &'static str,
+    pub state: ProgressState,
 }
 
 /// One agent's line in the standings.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Standing {
     /// 1-based place: by points won %, then points won, then id.
     pub place: usize,
@@ -90,7 +101,7 @@ pub struct Standing {
 }
 
 /// One agent's record over finished matches (a tournament's standings, `rally batch`'s summary).
-#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 pub struct Record {
     /// Finished matches.
     pub matches: usize,
@@ -127,7 +138,7 @@ impl Record {
 }
 
 /// A cell of the cross-table: the row agent's record against the column agent.
-#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct Cell {
     /// Finished matches between the two.
     pub matches: usize,
@@ -203,9 +214,9 @@ pub fn view(kind: Kind, agents: &[(i64, String)], matches: &[Match]) -> View {
         finished as f64 / progress.total as f64
     };
     progress.state = if progress.queued + progress.running > 0 {
-        "running"
+        ProgressState::Running
     } else {
-        "finished"
+        ProgressState::Finished
     };
     for s in &mut standings {
         s.points_won_pct = s.record.points_won_pct();
@@ -287,7 +298,7 @@ mod tests {
             (5, 3, 1, 1)
         );
         assert!((v.progress.fraction - 0.8).abs() < 1e-12);
-        assert_eq!(v.progress.state, "running");
+        assert_eq!(v.progress.state, ProgressState::Running);
         // x: 7+4+5 = 16 for, 3+6+5 = 14 against; y: 3+5 = 8 for, 12 against; z: 6 for, 4 against.
         let x = &v.standings.iter().find(|s| s.agent == "x").unwrap().record;
         assert_eq!((x.matches, x.wins, x.draws, x.losses), (3, 1, 1, 1));
@@ -303,6 +314,6 @@ mod tests {
         // A gauntlet's challengers never meet.
         let g = view(Kind::Gauntlet, &agents, &[]);
         assert!(g.cross_table[1][2].is_none() && g.cross_table[0][2].is_some());
-        assert_eq!(g.progress.state, "finished");
+        assert_eq!(g.progress.state, ProgressState::Finished);
     }
 }

@@ -3,7 +3,9 @@
 use super::*;
 
 pub(super) async fn list_agents(State(s): State<AppState>) -> ApiResult<Json<Value>> {
-    Ok(Json(json!({ "agents": db::agents(&s.pool).await? })))
+    Ok(Json(json!(wire::AgentList {
+        agents: db::agents(&s.pool).await?
+    })))
 }
 
 pub(super) async fn get_agent(
@@ -48,15 +50,8 @@ pub fn check_name(name: &str) -> Result<(), String> {
     Ok(())
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct SubmitAgent {
-    name: String,
-    checkpoint: Value,
-}
-
 /// Reads a multipart submission: a `name` text field and a `checkpoint` file (the checkpoint JSON).
-pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<SubmitAgent> {
+pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<wire::SubmitAgent> {
     let bad_part = |e: MultipartError| ApiError::new(e.status(), "bad_multipart", e.body_text());
     let (mut name, mut checkpoint) = (None, None);
     while let Some(field) = form.next_field().await.map_err(bad_part)? {
@@ -90,7 +85,7 @@ pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<SubmitAgent
             format!("the form has no '{f}' field"),
         )
     };
-    Ok(SubmitAgent {
+    Ok(wire::SubmitAgent {
         name: name.ok_or_else(|| missing("name"))?,
         checkpoint: checkpoint.ok_or_else(|| missing("checkpoint"))?,
     })
@@ -109,7 +104,7 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
             .map_err(|e| ApiError::new(e.status(), "bad_multipart", e.body_text()))?;
         read_multipart(form).await?
     } else {
-        let Json(body) = Json::<SubmitAgent>::from_request(req, &s).await?;
+        let Json(body) = Json::<wire::SubmitAgent>::from_request(req, &s).await?;
         body
     };
     check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;

@@ -7,14 +7,14 @@ use axum::extract::{Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use serde::Deserialize;
 use serde_json::{json, Value};
 
 use super::{
     agent_or_404, charge, check_token, limit_param, may_cancel, only_params, parse_id,
-    seed_or_clock, submitter, AgentRef, ApiError, ApiResult,
+    seed_or_clock, submitter, ApiError, ApiResult,
 };
 use crate::tournament::{self, Kind};
+use crate::wire::{self, ContestMatch, NamedAgent};
 use crate::{db, ratings, AppState, Budget};
 
 /// `?limit=` (1–1000, default 100); any other parameter is refused.
@@ -23,25 +23,10 @@ fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {
     limit_param(q, 100, 1000)
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct NewTournament {
-    kind: String,
-    agents: Vec<AgentRef>,
-    rallies_per_match: u32,
-    #[serde(default = "one")]
-    rounds: u32,
-    seed: Option<u64>,
-}
-
-fn one() -> u32 {
-    1
-}
-
 pub(super) async fn create_tournament(
     State(s): State<AppState>,
     headers: HeaderMap,
-    body: Result<Json<NewTournament>, JsonRejection>,
+    body: Result<Json<wire::NewTournament>, JsonRejection>,
 ) -> ApiResult<Response> {
     let caller = check_token(&s, &headers).await?;
     let Json(t) = body?;
@@ -121,7 +106,7 @@ async fn tournament_or_404(s: &AppState, id: i64) -> ApiResult<db::Tournament> {
 }
 
 /// A tournament with its progress, standings, cross-table and matches.
-async fn tournament_view(s: &AppState, t: db::Tournament) -> ApiResult<Value> {
+async fn tournament_view(s: &AppState, t: db::Tournament) -> ApiResult<wire::TournamentView> {
     let id = t.id;
     let ids: Vec<i64> = serde_json::from_str(&t.agents_json)
         .map_err(|e| anyhow::anyhow!("tournament {id}: stored agents unreadable: {e}"))?;
@@ -136,27 +121,25 @@ async fn tournament_view(s: &AppState, t: db::Tournament) -> ApiResult<Value> {
     let kind = Kind::parse(&t.kind).unwrap_or(Kind::RoundRobin);
     let matches = db::tournament_matches(&s.pool, id).await?;
     let view = tournament::view(kind, &agents, &matches);
-    let list: Vec<Value> = matches
-        .iter()
-        .map(|m| {
-            json!({"id": m.id, "agent_a": m.agent_a, "agent_b": m.agent_b, "status": m.status,
-                   "points_a": m.points_a, "points_b": m.points_b, "seed": m.seed})
-        })
-        .collect();
-    Ok(json!({
-        "id": t.id,
-        "kind": t.kind,
-        "agents": agents.iter().map(|(id, name)| json!({"id": id, "name": name})).collect::<Vec<_>>(),
-        "rallies_per_match": t.rallies_per_match,
-        "rounds": t.rounds,
-        "seed": t.seed,
-        "created_at": t.created_at,
-        "progress": view.progress,
-        "standings": view.standings,
-        "cross_table_agents": view.cross_table_agents,
-        "cross_table": view.cross_table,
-        "matches": list,
-    }))
+    Ok(wire::TournamentView {
+        summary: wire::TournamentSummary {
+            id: t.id,
+            kind: t.kind,
+            agents: agents
+                .into_iter()
+                .map(|(id, name)| NamedAgent { id, name })
+                .collect(),
+            rallies_per_match: t.rallies_per_match,
+            rounds: t.rounds,
+            created_at: t.created_at,
+            progress: view.progress,
+        },
+        seed: t.seed,
+        standings: view.standings,
+        cross_table_agents: view.cross_table_agents,
+        cross_table: view.cross_table,
+        matches: matches.iter().map(ContestMatch::of).collect(),
+    })
 }
 
 pub(super) async fn get_tournament(
@@ -164,9 +147,9 @@ pub(super) async fn get_tournament(
     Path(id): Path<String>,
 ) -> ApiResult<Json<Value>> {
     let id = parse_id(&id, "id")?;
-    Ok(Json(
-        tournament_view(&s, tournament_or_404(&s, id).await?).await?,
-    ))
+    Ok(Json(json!(
+        tournament_view(&s, tournament_or_404(&s, id).await?).await?
+    )))
 }
 
 pub(super) async fn list_tournaments(
@@ -174,24 +157,11 @@ pub(super) async fn list_tournaments(
     Query(q): Query<HashMap<String, String>>,
 ) -> ApiResult<Json<Value>> {
     let limit = limit_only(&q)?;
-    let mut out = Vec::new();
+    let mut tournaments = Vec::new();
     for t in db::tournaments(&s.pool, limit).await? {
-        let v = tournament_view(&s, t).await?;
-        let summary: serde_json::Map<String, Value> = [
-            "id",
-            "kind",
-            "agents",
-            "rallies_per_match",
-            "rounds",
-            "created_at",
-            "progress",
-        ]
-        .into_iter()
-        .map(|k| (k.to_string(), v[k].clone()))
-        .collect();
-        out.push(Value::Object(summary));
+        tournaments.push(tournament_view(&s, t).await?.summary);
     }
-    Ok(Json(json!({ "tournaments": out })))
+    Ok(Json(json!(wire::TournamentList { tournaments })))
 }
 
 pub(super) async fn cancel_tournament(
@@ -208,46 +178,13 @@ pub(super) async fn cancel_tournament(
             "tournament {id} has no queued or running match left"
         )));
     }
-    Ok(Json(tournament_view(&s, t).await?))
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct NewSprt {
-    a: AgentRef,
-    b: AgentRef,
-    #[serde(default)]
-    elo0: f64,
-    #[serde(default = "default_elo1")]
-    elo1: f64,
-    #[serde(default = "default_error")]
-    alpha: f64,
-    #[serde(default = "default_error")]
-    beta: f64,
-    #[serde(default = "default_sprt_rallies")]
-    rallies_per_match: u32,
-    #[serde(default = "default_sprt_matches")]
-    max_matches: u32,
-    seed: Option<u64>,
-}
-
-fn default_elo1() -> f64 {
-    50.0
-}
-fn default_error() -> f64 {
-    0.05
-}
-fn default_sprt_rallies() -> u32 {
-    20
-}
-fn default_sprt_matches() -> u32 {
-    200
+    Ok(Json(json!(tournament_view(&s, t).await?)))
 }
 
 pub(super) async fn create_sprt(
     State(s): State<AppState>,
     headers: HeaderMap,
-    body: Result<Json<NewSprt>, JsonRejection>,
+    body: Result<Json<wire::NewSprt>, JsonRejection>,
 ) -> ApiResult<Response> {
     let caller = check_token(&s, &headers).await?;
     let Json(t) = body?;
@@ -312,14 +249,14 @@ pub(super) async fn create_sprt(
 }
 
 /// An SPRT with its bounds, the point share and Elo estimate so far, and its matches.
-async fn sprt_view(s: &AppState, id: i64) -> ApiResult<Value> {
+async fn sprt_view(s: &AppState, id: i64) -> ApiResult<wire::SprtView> {
     let t = db::sprt(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("SPRT", id))?;
     let matches = db::sprt_matches(&s.pool, id).await?;
     let (lower, upper) = ratings::sprt_bounds(t.alpha, t.beta);
     let mut shares = Vec::new();
-    let list: Vec<Value> = matches
+    let list: Vec<wire::SprtMatch> = matches
         .iter()
         .map(|m| {
             let share = match (m.points_a, m.points_b) {
@@ -327,8 +264,10 @@ async fn sprt_view(s: &AppState, id: i64) -> ApiResult<Value> {
                 _ => None,
             };
             shares.extend(share);
-            json!({"id": m.id, "agent_a": m.agent_a, "agent_b": m.agent_b, "status": m.status,
-                   "points_a": m.points_a, "points_b": m.points_b, "seed": m.seed, "share_of_a": share})
+            wire::SprtMatch {
+                m: ContestMatch::of(m),
+                share_of_a: share,
+            }
         })
         .collect();
     let mean = (!shares.is_empty()).then(|| shares.iter().sum::<f64>() / shares.len() as f64);
@@ -340,14 +279,15 @@ async fn sprt_view(s: &AppState, id: i64) -> ApiResult<Value> {
             .await
             .map(|a| a.map(|a| a.name).unwrap_or_else(|| format!("#{aid}")))
     };
-    let mut v = json!(t);
-    v["agent_a_name"] = json!(name(t.agent_a).await?);
-    v["agent_b_name"] = json!(name(t.agent_b).await?);
-    v["bounds"] = json!({"lower": lower, "upper": upper});
-    v["mean_share_of_a"] = json!(mean);
-    v["elo_estimate"] = json!(elo);
-    v["matches"] = json!(list);
-    Ok(v)
+    Ok(wire::SprtView {
+        agent_a_name: name(t.agent_a).await?,
+        agent_b_name: name(t.agent_b).await?,
+        bounds: wire::Bounds { lower, upper },
+        mean_share_of_a: mean,
+        elo_estimate: elo,
+        matches: list,
+        row: t,
+    })
 }
 
 pub(super) async fn get_sprt(
@@ -355,7 +295,7 @@ pub(super) async fn get_sprt(
     Path(id): Path<String>,
 ) -> ApiResult<Json<Value>> {
     let id = parse_id(&id, "id")?;
-    Ok(Json(sprt_view(&s, id).await?))
+    Ok(Json(json!(sprt_view(&s, id).await?)))
 }
 
 pub(super) async fn list_sprts(
@@ -363,7 +303,9 @@ pub(super) async fn list_sprts(
     Query(q): Query<HashMap<String, String>>,
 ) -> ApiResult<Json<Value>> {
     let limit = limit_only(&q)?;
-    Ok(Json(json!({ "sprts": db::sprts(&s.pool, limit).await? })))
+    Ok(Json(json!(wire::SprtList {
+        sprts: db::sprts(&s.pool, limit).await?
+    })))
 }
 
 pub(super) async fn cancel_sprt(
@@ -383,7 +325,7 @@ pub(super) async fn cancel_sprt(
             t.status
         )));
     }
-    Ok(Json(sprt_view(&s, id).await?))
+    Ok(Json(json!(sprt_view(&s, id).await?)))
 }
 
 pub(super) async fn get_rating_history(

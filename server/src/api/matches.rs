@@ -75,19 +75,10 @@ pub(super) async fn live_match(
         .into_response())
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct QueueMatch {
-    a: AgentRef,
-    b: AgentRef,
-    rallies: u32,
-    seed: Option<u64>,
-}
-
 pub(super) async fn queue_match(
     State(s): State<AppState>,
     headers: HeaderMap,
-    body: Result<Json<QueueMatch>, JsonRejection>,
+    body: Result<Json<wire::QueueMatch>, JsonRejection>,
 ) -> ApiResult<Response> {
     let caller = check_token(&s, &headers).await?;
     let Json(q) = body?;
@@ -140,7 +131,10 @@ pub(super) async fn list_matches(
     let next = (page.len() as i64 == limit)
         .then(|| page.last().map(|m| m.id))
         .flatten();
-    Ok(Json(json!({ "matches": page, "next_before": next })))
+    Ok(Json(json!(wire::MatchList {
+        matches: page,
+        next_before: next
+    })))
 }
 
 pub(super) async fn get_match(
@@ -151,22 +145,25 @@ pub(super) async fn get_match(
     let m = db::match_row(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("match", id))?;
-    let rallies = db::rallies(&s.pool, id).await?;
+    let rally_log = db::rallies(&s.pool, id).await?;
     let drift: Option<Value> = db::drift(&s.pool, id)
         .await?
         .and_then(|d| serde_json::from_str(&d).ok());
-    let by_side: Vec<Value> = db::match_drift(&s.pool, id)
+    let drift_by_side = db::match_drift(&s.pool, id)
         .await?
         .into_iter()
-        .map(|(side, agent, d)| {
-            json!({"side": side, "agent_id": agent, "drift": serde_json::from_str::<Value>(&d).unwrap_or(Value::Null)})
+        .map(|(side, agent_id, d)| wire::SideDrift {
+            side,
+            agent_id,
+            drift: serde_json::from_str::<Value>(&d).unwrap_or(Value::Null),
         })
         .collect();
-    let mut v = json!(m);
-    v["rally_log"] = json!(rallies);
-    v["drift"] = drift.unwrap_or(Value::Null);
-    v["drift_by_side"] = json!(by_side);
-    Ok(Json(v))
+    Ok(Json(json!(wire::MatchDetail {
+        row: m,
+        rally_log,
+        drift,
+        drift_by_side,
+    })))
 }
 
 pub(super) async fn cancel_match(

@@ -11,9 +11,9 @@ use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use axum::{Json, Router};
-use serde::Deserialize;
 use serde_json::{json, Value};
 
+use crate::wire::{self, AgentRef};
 use crate::{db, AppState, Budget};
 
 mod agents;
@@ -86,8 +86,13 @@ impl ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        let body =
-            json!({"error": {"code": self.code, "message": self.message, "field": self.field}});
+        let body = wire::ErrorBody {
+            error: wire::ErrorDetail {
+                code: self.code.to_string(),
+                message: self.message,
+                field: self.field.map(str::to_string),
+            },
+        };
         let mut r = (self.status, Json(body)).into_response();
         if let Some(secs) = self.retry_after {
             r.headers_mut()
@@ -214,9 +219,10 @@ pub fn router(state: AppState) -> Router {
 
 async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {
     sqlx::query("SELECT 1").execute(&s.pool).await?;
-    Ok(Json(
-        json!({"status": "ok", "sim_version": sim::SIM_VERSION}),
-    ))
+    Ok(Json(json!(wire::Health {
+        status: "ok".into(),
+        sim_version: sim::SIM_VERSION.into()
+    })))
 }
 
 /// `GET /events`: server-sent events, one JSON `ServerEvent` per change (matches queued, started,
@@ -436,16 +442,6 @@ fn may_cancel(caller: Caller, owner: Option<i64>, what: &str) -> ApiResult<()> {
             ),
         )),
     }
-}
-
-/// An agent in a request: its id or its name.
-#[derive(Debug, Clone, PartialEq, Eq, Hash, Deserialize)]
-#[serde(untagged)]
-pub(crate) enum AgentRef {
-    /// By id.
-    Id(i64),
-    /// By name.
-    Name(String),
 }
 
 /// The agent `r` names, or 404 naming `field`.

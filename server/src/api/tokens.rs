@@ -2,16 +2,10 @@
 
 use super::*;
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct NewToken {
-    name: String,
-}
-
 pub(super) async fn issue_token(
     State(s): State<AppState>,
     headers: HeaderMap,
-    body: Result<Json<NewToken>, JsonRejection>,
+    body: Result<Json<wire::NewToken>, JsonRejection>,
 ) -> ApiResult<Response> {
     if check_token(&s, &headers).await? != Caller::Admin {
         return Err(ApiError::new(

@@ -16,7 +16,7 @@ pub async fn register_builtins(pool: &Pool) -> anyhow::Result<()> {
 }
 
 /// An agent row.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct Agent {
     /// Id.
     pub id: i64,

@@ -4,7 +4,7 @@
 use super::*;
 
 /// A tournament row.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct Tournament {
     /// Id.
     pub id: i64,
@@ -119,7 +119,7 @@ pub async fn cancel_tournament(pool: &Pool, id: i64) -> sqlx::Result<u64> {
 }
 
 /// An SPRT row.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct Sprt {
     /// Id.
     pub id: i64,

@@ -4,7 +4,7 @@
 use super::*;
 
 /// A match row.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct Match {
     /// Id.
     pub id: i64,
@@ -376,7 +376,7 @@ pub async fn cancel(pool: &Pool, id: i64) -> sqlx::Result<bool> {
 }
 
 /// A stored rally.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct Rally {
     /// Index in the match.
     pub idx: i64,

@@ -43,7 +43,7 @@ pub async fn agent_drift(pool: &Pool) -> sqlx::Result<Vec<(i64, Option<f64>, Opt
 }
 
 /// An agent's drift over its finished matches (its side's serves and returns, `match_drift`).
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct AgentDrift {
     /// Matches with drift statistics.
     pub matches: i64,
@@ -85,7 +85,7 @@ pub async fn agent_rally_lengths(pool: &Pool, agent: i64) -> sqlx::Result<Vec<(i
 }
 
 /// A crossing of the hitting plane that an agent is answerable for.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct AgentCrossing {
     /// The match.
     pub match_id: i64,
@@ -133,7 +133,7 @@ pub async fn agent_crossings(
 }
 
 /// One point of an agent's rating history.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct RatingPoint {
     /// Order in which matches finished (server-wide).
     pub seq: i64,

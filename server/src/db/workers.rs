@@ -32,7 +32,7 @@ pub struct Lease {
 }
 
 /// A worker as `GET /api/v1/workers` shows it.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
 pub struct Worker {
     /// Its name (unique; `HOST:PID` unless given).
     pub name: String,

@@ -10,7 +10,11 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Context};
 use clap::Args;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
 use serde_json::{json, Value};
+use server::tournament::ProgressState;
+use server::{db, wire};
 
 use super::CliError;
 
@@ -109,9 +113,15 @@ impl Client {
         }
     }
 
-    /// One request; Ok(body) on 2xx, Err(Refused) on a refusal, Err(other) when the server could not
-    /// be reached or answered something that is not JSON.
-    fn call(&self, method: &str, path: &str, body: Option<&Value>) -> anyhow::Result<Value> {
+    /// One request; Ok(body) on 2xx, Err(Refused) on a refusal (the server's `wire::ErrorBody`),
+    /// Err(other) when the server could not be reached or answered something that is not the
+    /// expected body.
+    fn call<T: DeserializeOwned>(
+        &self,
+        method: &str,
+        path: &str,
+        body: Option<&Value>,
+    ) -> anyhow::Result<T> {
         let url = format!("{}/api/v1{path}", self.base);
         let auth = format!("Bearer {}", self.token);
         let resp = match (method, body) {
@@ -136,15 +146,16 @@ impl Client {
             .read_json()
             .map_err(|e| anyhow!("{method} {url}: HTTP {status}, the answer is not JSON: {e}"))?;
         if (200..300).contains(&status) {
-            return Ok(v);
+            return serde_json::from_value(v)
+                .map_err(|e| anyhow!("{method} {url}: an unexpected answer: {e}"));
         }
-        let mut message = v["error"]["message"]
-            .as_str()
-            .map(str::to_string)
-            .unwrap_or_else(|| v.to_string());
-        if let Some(field) = v["error"]["field"].as_str() {
-            message = format!("{message} (field '{field}')");
-        }
+        let message = match serde_json::from_value::<wire::ErrorBody>(v.clone()) {
+            Ok(wire::ErrorBody { error }) => match error.field {
+                Some(field) => format!("{} (field '{field}')", error.message),
+                None => error.message,
+            },
+            Err(_) => v.to_string(),
+        };
         Err(Refused {
             status,
             message,
@@ -153,16 +164,17 @@ impl Client {
         .into())
     }
 
-    /// A POST that waits out rate limits (429 + Retry-After), telling `say` why it waits.
-    fn post_patiently(
+    /// A POST of `body` that waits out rate limits (429 + Retry-After), telling `say` why it waits.
+    fn post_patiently<B: Serialize, T: DeserializeOwned>(
         &self,
         path: &str,
-        body: &Value,
+        body: &B,
         say: &dyn Fn(String),
-    ) -> anyhow::Result<Value> {
+    ) -> anyhow::Result<T> {
+        let body = serde_json::to_value(body)?;
         let mut waited = 0u64;
         loop {
-            match self.call("POST", path, Some(body)) {
+            match self.call("POST", path, Some(&body)) {
                 Err(e) => match e.downcast_ref::<Refused>() {
                     Some(r) if r.status == 429 && waited < 600 => {
                         let secs = r.retry_after.unwrap_or(5).clamp(1, 60);
@@ -203,15 +215,13 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
         ));
     }
     let client = Client::new(&args.server, token);
-    let health = client.call("GET", "/healthz", None)?;
-    let listed = client.call("GET", "/agents", None)?;
+    let health: wire::Health = client.call("GET", "/healthz", None)?;
+    let listed: wire::AgentList = client.call("GET", "/agents", None)?;
     let mut by_name = HashMap::new();
     let mut names = HashMap::new();
-    for a in listed["agents"].as_array().into_iter().flatten() {
-        if let (Some(id), Some(name)) = (a["id"].as_i64(), a["name"].as_str()) {
-            by_name.insert(name.to_string(), id);
-            names.insert(id, name.to_string());
-        }
+    for a in listed.agents {
+        by_name.insert(a.name.clone(), a.id);
+        names.insert(a.id, a.name);
     }
     let ids: Vec<i64> = names.keys().copied().collect();
     let jobs = jobs(&plan, &by_name, &ids)
@@ -219,7 +229,7 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     eprintln!(
         "server {} (simulator {}), {} agents; submitting {} entries",
         args.server,
-        health["sim_version"].as_str().unwrap_or("?"),
+        health.sim_version,
         names.len(),
         jobs.len()
     );
@@ -239,23 +249,68 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
                 b,
                 rallies,
                 seed,
-            } => client
-                .post_patiently(
-                    "/matches",
-                    &json!({"a": a, "b": b, "rallies": rallies, "seed": seed}),
-                    &say,
-                )
-                .map(|m| plain.extend(m["id"].as_i64())),
-            Job::Tournament { body, label } => {
-                client.post_patiently("/tournaments", body, &say).map(|t| {
-                    let total = t["progress"]["total"].as_u64().unwrap_or(0) as usize;
-                    tournaments.extend(t["id"].as_i64().map(|id| (id, label.clone(), total)));
-                })
+            } => {
+                let q = wire::QueueMatch {
+                    a: (*a).into(),
+                    b: (*b).into(),
+                    rallies: *rallies,
+                    seed: Some(*seed),
+                };
+                client
+                    .post_patiently::<_, db::Match>("/matches", &q, &say)
+                    .map(|m| plain.push(m.id))
             }
-            Job::Sprt { body, label } => client.post_patiently("/sprt", body, &say).map(|t| {
-                let most = t["max_matches"].as_u64().unwrap_or(0) as usize;
-                sprts.extend(t["id"].as_i64().map(|id| (id, label.clone(), most)));
-            }),
+            Job::Tournament {
+                kind,
+                agents,
+                rallies_per_match,
+                rounds,
+                seed,
+                label,
+            } => {
+                let q = wire::NewTournament {
+                    kind: kind.clone(),
+                    agents: agents.iter().map(|&id| id.into()).collect(),
+                    rallies_per_match: *rallies_per_match,
+                    rounds: *rounds,
+                    seed: Some(*seed),
+                };
+                client
+                    .post_patiently::<_, wire::TournamentView>("/tournaments", &q, &say)
+                    .map(|t| {
+                        let s = t.summary;
+                        tournaments.push((s.id, label.clone(), s.progress.total));
+                    })
+            }
+            Job::Sprt {
+                a,
+                b,
+                elo0,
+                elo1,
+                alpha,
+                beta,
+                rallies_per_match,
+                max_matches,
+                seed,
+                label,
+            } => {
+                let d = wire::NewSprt::new((*a).into(), (*b).into());
+                let q = wire::NewSprt {
+                    elo0: elo0.unwrap_or(d.elo0),
+                    elo1: elo1.unwrap_or(d.elo1),
+                    alpha: alpha.unwrap_or(d.alpha),
+                    beta: beta.unwrap_or(d.beta),
+                    rallies_per_match: *rallies_per_match,
+                    max_matches: max_matches.unwrap_or(d.max_matches),
+                    seed: Some(*seed),
+                    ..d
+                };
+                client
+                    .post_patiently::<_, wire::SprtView>("/sprt", &q, &say)
+                    .map(|t| {
+                        sprts.push((t.row.id, label.clone(), t.row.max_matches.max(0) as usize))
+                    })
+            }
         };
         if let Err(e) = submitted {
             let done = if plain.is_empty() && tournaments.is_empty() && sprts.is_empty() {
@@ -316,74 +371,75 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
         .iter()
         .map(|(id, label, total)| bar(*total, format!("tournament {id}: {label}")))
         .collect();
-    let finished = |s: &str| matches!(s, "done" | "failed" | "cancelled");
+    let finished = |s: db::MatchStatus| {
+        matches!(
+            s,
+            db::MatchStatus::Done | db::MatchStatus::Failed | db::MatchStatus::Cancelled
+        )
+    };
     let started = Instant::now();
-    let mut rows: HashMap<i64, Value> = HashMap::new();
-    let mut views: Vec<Value> = vec![Value::Null; tournaments.len()];
+    let mut rows: HashMap<i64, db::Match> = HashMap::new();
+    let mut views: Vec<Option<wire::TournamentView>> = vec![None; tournaments.len()];
     let s_bars: Vec<ProgressBar> = sprts
         .iter()
         .map(|(id, label, most)| bar(*most, format!("sprt {id}: {label}")))
         .collect();
-    let mut sprt_views: Vec<Value> = vec![Value::Null; sprts.len()];
+    let mut sprt_views: Vec<Option<wire::SprtView>> = vec![None; sprts.len()];
+    let sprt_running = |v: &Option<wire::SprtView>| {
+        v.as_ref()
+            .is_none_or(|v| v.row.status == db::SprtStatus::Running)
+    };
     loop {
         for &id in &plain {
-            if rows
-                .get(&id)
-                .is_some_and(|m| finished(m["status"].as_str().unwrap_or("")))
-            {
+            if rows.get(&id).is_some_and(|m| finished(m.status)) {
                 continue;
             }
-            let m = client.call("GET", &format!("/matches/{id}"), None)?;
-            rows.insert(id, m);
+            let m: wire::MatchDetail = client.call("GET", &format!("/matches/{id}"), None)?;
+            rows.insert(id, m.row);
         }
         let plain_done = plain
             .iter()
-            .filter(|id| {
-                rows.get(id)
-                    .is_some_and(|m| finished(m["status"].as_str().unwrap_or("")))
-            })
+            .filter(|id| rows.get(id).is_some_and(|m| finished(m.status)))
             .count();
         if let Some(b) = &plain_bar {
             b.set_position(plain_done as u64);
             let running = plain
                 .iter()
-                .filter(|id| rows.get(id).is_some_and(|m| m["status"] == "running"))
+                .filter(|id| {
+                    rows.get(id)
+                        .is_some_and(|m| m.status == db::MatchStatus::Running)
+                })
                 .count();
             b.set_message(format!("({running} running)"));
         }
         let mut all_done = plain_done == plain.len();
         for (k, (id, _, _)) in tournaments.iter().enumerate() {
-            if views[k]["progress"]["state"] == "finished" {
-                continue;
-            }
-            let v = client.call("GET", &format!("/tournaments/{id}"), None)?;
-            let p = &v["progress"];
-            let ended = ["done", "failed", "cancelled"]
-                .iter()
-                .map(|s| p[*s].as_u64().unwrap_or(0))
-                .sum::<u64>();
-            t_bars[k].set_position(ended);
-            t_bars[k].set_message(format!("({} running)", p["running"].as_u64().unwrap_or(0)));
-            all_done &= p["state"] == "finished";
-            views[k] = v;
-        }
-        for (k, (id, _, _)) in sprts.iter().enumerate() {
-            if sprt_views[k]["status"]
-                .as_str()
-                .is_some_and(|s| s != "running")
+            if views[k]
+                .as_ref()
+                .is_some_and(|v| v.summary.progress.state == ProgressState::Finished)
             {
                 continue;
             }
-            let v = client.call("GET", &format!("/sprt/{id}"), None)?;
-            s_bars[k].set_position(v["matches_done"].as_u64().unwrap_or(0));
+            let v: wire::TournamentView =
+                client.call("GET", &format!("/tournaments/{id}"), None)?;
+            let p = &v.summary.progress;
+            t_bars[k].set_position((p.done + p.failed + p.cancelled) as u64);
+            t_bars[k].set_message(format!("({} running)", p.running));
+            all_done &= p.state == ProgressState::Finished;
+            views[k] = Some(v);
+        }
+        for (k, (id, _, _)) in sprts.iter().enumerate() {
+            if !sprt_running(&sprt_views[k]) {
+                continue;
+            }
+            let v: wire::SprtView = client.call("GET", &format!("/sprt/{id}"), None)?;
+            s_bars[k].set_position(v.row.matches_done.max(0) as u64);
             s_bars[k].set_message(format!(
                 "LLR {:+.2} in [{:.2}, {:.2}]",
-                v["llr"].as_f64().unwrap_or(0.0),
-                v["bounds"]["lower"].as_f64().unwrap_or(0.0),
-                v["bounds"]["upper"].as_f64().unwrap_or(0.0)
+                v.row.llr, v.bounds.lower, v.bounds.upper
             ));
-            all_done &= v["status"] != "running";
-            sprt_views[k] = v;
+            all_done &= v.row.status != db::SprtStatus::Running;
+            sprt_views[k] = Some(v);
         }
         if all_done {
             break;
@@ -400,25 +456,24 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     for b in t_bars.iter().chain(s_bars.iter()).chain(plain_bar.iter()) {
         b.finish();
     }
+    let views: Vec<wire::TournamentView> = views.into_iter().flatten().collect();
+    let sprt_views: Vec<wire::SprtView> = sprt_views.into_iter().flatten().collect();
     // Full rows of the tournaments' and SPRTs' matches, for the CSV and the summary.
-    for v in views.iter().chain(&sprt_views) {
-        for m in v["matches"].as_array().into_iter().flatten() {
-            if let Some(id) = m["id"].as_i64() {
-                let full = client.call("GET", &format!("/matches/{id}"), None)?;
-                rows.insert(id, full);
-            }
-        }
+    let contest_ids: Vec<i64> = views
+        .iter()
+        .flat_map(|v| v.matches.iter().map(|m| m.id))
+        .chain(
+            sprt_views
+                .iter()
+                .flat_map(|v| v.matches.iter().map(|m| m.m.id)),
+        )
+        .collect();
+    for &id in &contest_ids {
+        let full: wire::MatchDetail = client.call("GET", &format!("/matches/{id}"), None)?;
+        rows.insert(id, full.row);
     }
     let mut order: Vec<i64> = plain.clone();
-    for v in views.iter().chain(&sprt_views) {
-        order.extend(
-            v["matches"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(|m| m["id"].as_i64()),
-        );
-    }
+    order.extend(&contest_ids);
     let csv_path = args
         .csv
         .clone()
@@ -433,26 +488,26 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
         println!();
         println!(
             "sprt {id}: {label}, H0 {} / H1 {} Elo: {} after {} matches, LLR {:+.3} in [{:.3}, {:.3}], Elo estimate {}",
-            v["elo0"],
-            v["elo1"],
-            v["status"].as_str().unwrap_or("?"),
-            v["matches_done"],
-            v["llr"].as_f64().unwrap_or(0.0),
-            v["bounds"]["lower"].as_f64().unwrap_or(0.0),
-            v["bounds"]["upper"].as_f64().unwrap_or(0.0),
-            v["elo_estimate"]
-                .as_f64()
-                .map_or("–".into(), |e| format!("{e:+.1}"))
+            v.row.elo0,
+            v.row.elo1,
+            v.row.status,
+            v.row.matches_done,
+            v.row.llr,
+            v.bounds.lower,
+            v.bounds.upper,
+            v.elo_estimate.map_or("–".into(), |e| format!("{e:+.1}"))
         );
     }
     println!("wrote {} ({} matches)", csv_path.display(), order.len());
     let broken: Vec<String> = sprt_views
         .iter()
-        .zip(&sprts)
-        .filter_map(|(v, (id, _, _))| {
-            let s = v["status"].as_str()?;
-            matches!(s, "failed" | "cancelled").then(|| format!("SPRT {id} {s}"))
+        .filter(|v| {
+            matches!(
+                v.row.status,
+                db::SprtStatus::Failed | db::SprtStatus::Cancelled
+            )
         })
+        .map(|v| format!("SPRT {} {}", v.row.id, v.row.status))
         .collect();
     if !broken.is_empty() {
         return Err(CliError::Failed(anyhow!("{}", broken.join(", "))));
@@ -460,8 +515,8 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
     let bad: Vec<String> = order
         .iter()
         .filter_map(|id| {
-            let s = rows.get(id)?["status"].as_str()?.to_string();
-            (s != "done").then(|| format!("{id} {s}"))
+            let s = rows.get(id)?.status;
+            (s != db::MatchStatus::Done).then(|| format!("{id} {s}"))
         })
         .collect();
     if !bad.is_empty() {
@@ -483,11 +538,16 @@ fn name_of(names: &HashMap<i64, String>, id: Option<i64>) -> String {
 fn write_csv(
     path: &Path,
     order: &[i64],
-    rows: &HashMap<i64, Value>,
+    rows: &HashMap<i64, db::Match>,
     names: &HashMap<i64, String>,
 ) -> anyhow::Result<()> {
     let mut w = csv::Writer::from_path(path)?;
-    let numbers = [
+    w.write_record([
+        "match_id",
+        "tournament_id",
+        "agent_a",
+        "agent_b",
+        "status",
         "rallies",
         "seed",
         "points_a",
@@ -497,39 +557,41 @@ fn write_csv(
         "in_box_fraction",
         "energy_distance",
         "drift_slope",
-    ];
-    let mut header = vec!["match_id", "tournament_id", "agent_a", "agent_b", "status"];
-    header.extend(numbers);
-    header.extend(["sim_version", "preset", "error"]);
-    w.write_record(&header)?;
-    let text = |v: &Value| match v {
-        Value::Null => String::new(),
-        Value::String(s) => s.clone(),
-        other => other.to_string(),
-    };
+        "sim_version",
+        "preset",
+        "error",
+    ])?;
+    fn opt<T: ToString>(v: Option<T>) -> String {
+        v.map_or(String::new(), |x| x.to_string())
+    }
     for id in order {
         let Some(m) = rows.get(id) else { continue };
-        let mut rec = vec![
+        w.write_record([
             id.to_string(),
-            text(&m["tournament_id"]),
-            name_of(names, m["agent_a"].as_i64()),
-            name_of(names, m["agent_b"].as_i64()),
-            text(&m["status"]),
-        ];
-        rec.extend(numbers.iter().map(|k| text(&m[*k])));
-        rec.extend(
-            ["sim_version", "preset", "error"]
-                .iter()
-                .map(|k| text(&m[*k])),
-        );
-        w.write_record(&rec)?;
+            opt(m.tournament_id),
+            name_of(names, Some(m.agent_a)),
+            name_of(names, Some(m.agent_b)),
+            m.status.to_string(),
+            m.rallies.to_string(),
+            m.seed.to_string(),
+            opt(m.points_a),
+            opt(m.points_b),
+            opt(m.mean_rally_length),
+            opt(m.max_rally_length),
+            opt(m.in_box_fraction),
+            opt(m.energy_distance),
+            opt(m.drift_slope),
+            m.sim_version.clone(),
+            m.preset.clone(),
+            opt(m.error.clone()),
+        ])?;
     }
     w.flush()?;
     Ok(())
 }
 
 /// Per agent over the batch's finished matches: matches, wins/draws/losses, points, mean rally length.
-fn print_summary(order: &[i64], rows: &HashMap<i64, Value>, names: &HashMap<i64, String>) {
+fn print_summary(order: &[i64], rows: &HashMap<i64, db::Match>, names: &HashMap<i64, String>) {
     #[derive(Default)]
     struct Line {
         record: server::tournament::Record,
@@ -538,15 +600,11 @@ fn print_summary(order: &[i64], rows: &HashMap<i64, Value>, names: &HashMap<i64,
     let mut lines: HashMap<i64, Line> = HashMap::new();
     for id in order {
         let Some(m) = rows.get(id) else { continue };
-        let (Some(a), Some(b), Some(pa), Some(pb)) = (
-            m["agent_a"].as_i64(),
-            m["agent_b"].as_i64(),
-            m["points_a"].as_i64(),
-            m["points_b"].as_i64(),
-        ) else {
+        let (a, b) = (m.agent_a, m.agent_b);
+        let (Some(pa), Some(pb)) = (m.points_a, m.points_b) else {
             continue;
         };
-        let mean = m["mean_rally_length"].as_f64().unwrap_or(0.0);
+        let mean = m.mean_rally_length.unwrap_or(0.0);
         for (me, won, lost) in [(a, pa, pb), (b, pb, pa)] {
             let x = lines.entry(me).or_default();
             x.record.add(won, lost);
@@ -578,15 +636,10 @@ fn print_summary(order: &[i64], rows: &HashMap<i64, Value>, names: &HashMap<i64,
 }
 
 /// A tournament's standings and cross-table (points won–lost), as the server computed them.
-fn print_standings(id: i64, label: &str, v: &Value) {
+fn print_standings(id: i64, label: &str, v: &wire::TournamentView) {
     println!();
     println!("tournament {id}: {label}");
-    let agents: Vec<String> = v["cross_table_agents"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .map(|a| a.as_str().unwrap_or("?").to_string())
-        .collect();
+    let agents = &v.cross_table_agents;
     print!("{:<24}", "");
     for k in 0..agents.len() {
         print!(" {:>9}", format!("[{}]", k + 1));
@@ -595,25 +648,17 @@ fn print_standings(id: i64, label: &str, v: &Value) {
     for (i, name) in agents.iter().enumerate() {
         print!("{:<24}", format!("[{}] {name}", i + 1));
         for j in 0..agents.len() {
-            let c = &v["cross_table"][i][j];
-            let cell = if c.is_null() {
-                "-".to_string()
-            } else {
-                format!(
-                    "{}-{}",
-                    c["points_for"].as_i64().unwrap_or(0),
-                    c["points_against"].as_i64().unwrap_or(0)
-                )
+            let cell = match v.cross_table.get(i).and_then(|row| row.get(j)) {
+                Some(Some(c)) => format!("{}-{}", c.points_for, c.points_against),
+                _ => "-".to_string(),
             };
             print!(" {cell:>9}");
         }
-        let place = v["standings"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .find(|s| s["agent"].as_str() == Some(name.as_str()))
-            .and_then(|s| s["place"].as_u64())
-            .map_or("?".into(), |p| p.to_string());
+        let place = v
+            .standings
+            .iter()
+            .find(|s| &s.agent == name)
+            .map_or("?".into(), |s| s.place.to_string());
         println!("   {place:>5}");
     }
 }

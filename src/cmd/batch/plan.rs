@@ -1,12 +1,12 @@
 //! A batch plan (`rally batch PLAN.toml`): what it may say, and the requests it turns into.
 //!
-//! Parsing and checking only: no I/O, nothing but serde, serde_json and toml, so that the fuzz
-//! target `fuzz/fuzz_targets/batch_plan.rs` compiles this very file (`#[path]`) without the CLI.
+//! Parsing and checking only: no I/O, nothing but serde and toml, so that the fuzz target
+//! `fuzz/fuzz_targets/batch_plan.rs` compiles this very file (`#[path]`) without the CLI. The jobs
+//! are plain data; `rally batch` turns them into the server's request types (`server::wire`).
 
 use std::collections::HashMap;
 
 use serde::Deserialize;
-use serde_json::{json, Value};
 
 /// The most matches one plan may submit (entries times their repeats): a plan is typed by a person,
 /// and a typo such as `repeat = 10000` on many entries must not build millions of requests.
@@ -96,11 +96,24 @@ pub enum Job {
         seed: u64,
     },
     Tournament {
-        body: Value,
+        kind: String,
+        agents: Vec<i64>,
+        rallies_per_match: u32,
+        rounds: u32,
+        seed: u64,
         label: String,
     },
     Sprt {
-        body: Value,
+        a: i64,
+        b: i64,
+        /// H0, H1, alpha, beta where the plan gives them (the server's defaults otherwise).
+        elo0: Option<f64>,
+        elo1: Option<f64>,
+        alpha: Option<f64>,
+        beta: Option<f64>,
+        rallies_per_match: u32,
+        max_matches: Option<u32>,
+        seed: u64,
         label: String,
     },
 }
@@ -166,9 +179,12 @@ pub fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<V
             .collect::<Result<_, _>>()?;
         let seed = t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64);
         out.push(Job::Tournament {
-            body: json!({"kind": t.kind, "agents": agents, "rallies_per_match": t.rallies_per_match.unwrap_or(plan.rallies),
-                         "rounds": t.rounds, "seed": seed}),
             label: format!("{}, {} agents", t.kind, agents.len()),
+            kind: t.kind.clone(),
+            agents,
+            rallies_per_match: t.rallies_per_match.unwrap_or(plan.rallies),
+            rounds: t.rounds,
+            seed,
         });
         k += 1;
     }
@@ -178,22 +194,6 @@ pub fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<V
         if a == b {
             return Err(format!("{at}: an SPRT needs two different agents"));
         }
-        let mut body = json!({"a": a, "b": b,
-            "seed": t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64),
-            "rallies_per_match": t.rallies_per_match.unwrap_or(plan.rallies)});
-        for (key, v) in [
-            ("elo0", t.elo0),
-            ("elo1", t.elo1),
-            ("alpha", t.alpha),
-            ("beta", t.beta),
-        ] {
-            if let Some(v) = v {
-                body[key] = json!(v);
-            }
-        }
-        if let Some(m) = t.max_matches {
-            body["max_matches"] = json!(m);
-        }
         let name = |id: i64| {
             agents
                 .iter()
@@ -201,7 +201,15 @@ pub fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<V
                 .map_or(format!("#{id}"), |(n, _)| n.clone())
         };
         out.push(Job::Sprt {
-            body,
+            a,
+            b,
+            elo0: t.elo0,
+            elo1: t.elo1,
+            alpha: t.alpha,
+            beta: t.beta,
+            rallies_per_match: t.rallies_per_match.unwrap_or(plan.rallies),
+            max_matches: t.max_matches,
+            seed: t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64),
             label: format!("{} vs {}", name(a), name(b)),
         });
         k += 1;
@@ -243,12 +251,18 @@ mod tests {
             m,
             vec![(1, 2, 5, 10), (2, 1, 5, 11), (1, 2, 5, 12), (2, 1, 5, 99)]
         );
-        let Job::Tournament { body, .. } = &jobs[4] else {
+        let Job::Tournament {
+            agents,
+            seed,
+            rallies_per_match,
+            ..
+        } = &jobs[4]
+        else {
             panic!("a tournament last")
         };
-        assert_eq!(body["agents"], json!([1, 2]));
-        assert_eq!(body["seed"], 12, "the third entry: seed + 2");
-        assert_eq!(body["rallies_per_match"], 5);
+        assert_eq!(agents, &[1, 2]);
+        assert_eq!(*seed, 12, "the third entry: seed + 2");
+        assert_eq!(*rallies_per_match, 5);
     }
 
     #[test]

@@ -1,0 +1,356 @@
+//! The API's bodies as types: what a client sends and what the server answers, shared by the
+//! server's handlers, `rally batch` and the tests, so that the three cannot drift apart (the OpenAPI
+//! document describes the same shapes for everyone else; `page::tests` holds it to the rows).
+//!
+//! Requests refuse unknown fields. Responses are the store's rows (`db::Match`, `db::Agent`, …),
+//! flattened where the answer adds to a row.
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::db;
+use crate::domain::MatchStatus;
+use crate::tournament::{Cell, Progress, Standing};
+
+/// An agent in a request: its id or its name.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum AgentRef {
+    /// By id.
+    Id(i64),
+    /// By name.
+    Name(String),
+}
+
+impl From<&str> for AgentRef {
+    fn from(name: &str) -> AgentRef {
+        AgentRef::Name(name.to_string())
+    }
+}
+
+impl From<i64> for AgentRef {
+    fn from(id: i64) -> AgentRef {
+        AgentRef::Id(id)
+    }
+}
+
+/// `POST /matches`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QueueMatch {
+    /// Side A.
+    pub a: AgentRef,
+    /// Side B.
+    pub b: AgentRef,
+    /// Rallies to play.
+    pub rallies: u32,
+    /// Match seed (default: from the clock).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+}
+
+/// `POST /tournaments`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewTournament {
+    /// `round_robin` or `gauntlet`.
+    pub kind: String,
+    /// The agents (a gauntlet's challenger first).
+    pub agents: Vec<AgentRef>,
+    /// Rallies per match.
+    pub rallies_per_match: u32,
+    /// Rounds (sides swapped every round).
+    #[serde(default = "one")]
+    pub rounds: u32,
+    /// Seed of match 0 (match k gets seed + k; default: from the clock).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+}
+
+fn one() -> u32 {
+    1
+}
+
+/// `POST /sprt`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewSprt {
+    /// The agent under test.
+    pub a: AgentRef,
+    /// The baseline.
+    pub b: AgentRef,
+    /// H0: A's Elo advantage is `elo0`.
+    #[serde(default)]
+    pub elo0: f64,
+    /// H1: A's Elo advantage is `elo1`.
+    #[serde(default = "default_elo1")]
+    pub elo1: f64,
+    /// False-positive rate.
+    #[serde(default = "default_error")]
+    pub alpha: f64,
+    /// False-negative rate.
+    #[serde(default = "default_error")]
+    pub beta: f64,
+    /// Rallies per match.
+    #[serde(default = "default_sprt_rallies")]
+    pub rallies_per_match: u32,
+    /// Matches at most (then inconclusive).
+    #[serde(default = "default_sprt_matches")]
+    pub max_matches: u32,
+    /// Seed of match 0 (default: from the clock).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+}
+
+impl NewSprt {
+    /// An SPRT of `a` against `b` with the server's defaults (H0 0, H1 50 Elo, α = β = 0.05, 20
+    /// rallies a match, at most 200 matches, the seed from the clock).
+    pub fn new(a: AgentRef, b: AgentRef) -> NewSprt {
+        NewSprt {
+            a,
+            b,
+            elo0: 0.0,
+            elo1: default_elo1(),
+            alpha: default_error(),
+            beta: default_error(),
+            rallies_per_match: default_sprt_rallies(),
+            max_matches: default_sprt_matches(),
+            seed: None,
+        }
+    }
+}
+
+fn default_elo1() -> f64 {
+    50.0
+}
+
+fn default_error() -> f64 {
+    0.05
+}
+
+fn default_sprt_rallies() -> u32 {
+    20
+}
+
+fn default_sprt_matches() -> u32 {
+    200
+}
+
+/// `POST /agents` (JSON; the multipart form has the same two fields).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SubmitAgent {
+    /// Unique name.
+    pub name: String,
+    /// The checkpoint, in the agents' format.
+    pub checkpoint: Value,
+}
+
+/// `POST /tokens`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewToken {
+    /// The submitter's name.
+    pub name: String,
+}
+
+/// Every 4xx and 5xx answer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ErrorBody {
+    /// What went wrong.
+    pub error: ErrorDetail,
+}
+
+/// What went wrong, and where.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ErrorDetail {
+    /// Machine-readable code (`bad_request`, `not_found`, `rate_limited`, …).
+    pub code: String,
+    /// For people.
+    pub message: String,
+    /// The request field at fault, if one is.
+    pub field: Option<String>,
+}
+
+/// `GET /healthz`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Health {
+    /// `ok`.
+    pub status: String,
+    /// The simulator version this server plays with.
+    pub sim_version: String,
+}
+
+/// `GET /agents`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AgentList {
+    /// Every agent, by id.
+    pub agents: Vec<db::Agent>,
+}
+
+/// `GET /matches`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MatchList {
+    /// The page, newest first.
+    pub matches: Vec<db::Match>,
+    /// `?before=` this id gets the next page (absent on the last one).
+    pub next_before: Option<i64>,
+}
+
+/// One side's drift statistics in a match.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SideDrift {
+    /// `A` or `B`.
+    pub side: String,
+    /// Its agent.
+    pub agent_id: i64,
+    /// The statistics (DESIGN §7).
+    pub drift: Value,
+}
+
+/// `GET /matches/{id}`: the match row, its rallies and drift.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MatchDetail {
+    /// The row.
+    #[serde(flatten)]
+    pub row: db::Match,
+    /// Its rallies, by index.
+    pub rally_log: Vec<db::Rally>,
+    /// The match's drift statistics (both sides' returns), once done.
+    pub drift: Option<Value>,
+    /// Each side's.
+    pub drift_by_side: Vec<SideDrift>,
+}
+
+/// A match as a tournament or an SPRT lists it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ContestMatch {
+    /// Match id.
+    pub id: i64,
+    /// Side A.
+    pub agent_a: i64,
+    /// Side B.
+    pub agent_b: i64,
+    /// Its state.
+    pub status: MatchStatus,
+    /// A's points, once done.
+    pub points_a: Option<i64>,
+    /// B's points, once done.
+    pub points_b: Option<i64>,
+    /// Its seed.
+    pub seed: i64,
+}
+
+/// A match as an SPRT lists it: with the point share of the SPRT's agent A, once done.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SprtMatch {
+    /// The match.
+    #[serde(flatten)]
+    pub m: ContestMatch,
+    /// A's share of the points.
+    pub share_of_a: Option<f64>,
+}
+
+impl ContestMatch {
+    /// The listed fields of `m`.
+    pub fn of(m: &db::Match) -> ContestMatch {
+        ContestMatch {
+            id: m.id,
+            agent_a: m.agent_a,
+            agent_b: m.agent_b,
+            status: m.status,
+            points_a: m.points_a,
+            points_b: m.points_b,
+            seed: m.seed,
+        }
+    }
+}
+
+/// An agent's id and name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NamedAgent {
+    /// Id.
+    pub id: i64,
+    /// Name.
+    pub name: String,
+}
+
+/// A tournament as `GET /tournaments` lists it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TournamentSummary {
+    /// Id.
+    pub id: i64,
+    /// `round_robin` or `gauntlet`.
+    pub kind: String,
+    /// Its agents, in the order given.
+    pub agents: Vec<NamedAgent>,
+    /// Rallies per match.
+    pub rallies_per_match: i64,
+    /// Rounds.
+    pub rounds: i64,
+    /// When created.
+    pub created_at: String,
+    /// Matches by state.
+    pub progress: Progress,
+}
+
+/// `GET /tournaments/{id}`: the summary, its seed, standings, cross-table and matches.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TournamentView {
+    /// What the list shows.
+    #[serde(flatten)]
+    pub summary: TournamentSummary,
+    /// Seed of match 0.
+    pub seed: i64,
+    /// Standings, best first.
+    pub standings: Vec<Standing>,
+    /// The cross-table's agents (rows and columns).
+    pub cross_table_agents: Vec<String>,
+    /// Row agent's record against the column agent (none on the diagonal).
+    pub cross_table: Vec<Vec<Option<Cell>>>,
+    /// Its matches, by id.
+    pub matches: Vec<ContestMatch>,
+}
+
+/// `GET /tournaments`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TournamentList {
+    /// Newest first.
+    pub tournaments: Vec<TournamentSummary>,
+}
+
+/// An SPRT's log-likelihood-ratio bounds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Bounds {
+    /// Accept H0 at or below.
+    pub lower: f64,
+    /// Accept H1 at or above.
+    pub upper: f64,
+}
+
+/// `GET /sprt/{id}`: the row, names, bounds, estimates and matches.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SprtView {
+    /// The row.
+    #[serde(flatten)]
+    pub row: db::Sprt,
+    /// Agent A's name.
+    pub agent_a_name: String,
+    /// Agent B's name.
+    pub agent_b_name: String,
+    /// The decision bounds.
+    pub bounds: Bounds,
+    /// Mean point share of A over the finished matches.
+    pub mean_share_of_a: Option<f64>,
+    /// The Elo difference that share means.
+    pub elo_estimate: Option<f64>,
+    /// Its matches, by id.
+    pub matches: Vec<SprtMatch>,
+}
+
+/// `GET /sprt`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SprtList {
+    /// Newest first.
+    pub sprts: Vec<db::Sprt>,
+}
