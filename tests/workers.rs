@@ -9,7 +9,13 @@ use std::io::BufRead;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use serde_json::{json, Value};
+use serde_json::json;
+use server::db::{MatchStatus, SprtStatus, WorkerStatus};
+use server::tournament::ProgressState;
+use server::wire::{
+    MatchDetail, MatchList, NewSprt, NewTournament, QueueMatch, SprtView, TournamentView,
+    WorkerList,
+};
 
 mod common;
 use common::*;
@@ -18,22 +24,17 @@ const RALLIES: i64 = 6;
 
 /// The matches `name` holds the lease of, per `GET /workers`.
 fn holding(addr: &str, name: &str) -> Vec<i64> {
-    let (code, w) = call(addr, "GET", "/api/v1/workers", None, None);
-    assert_eq!(code, 200, "{w}");
-    w["workers"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|x| x["name"] == name)
-        .map(|x| {
-            x["matches_running"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|i| i.as_i64().unwrap())
-                .collect()
-        })
+    let w: WorkerList = get_as(addr, "/api/v1/workers");
+    w.workers
+        .into_iter()
+        .find(|x| x.row.name == name)
+        .map(|x| x.matches_running)
         .unwrap_or_default()
+}
+
+/// A match as the API shows it.
+fn detail(addr: &str, id: i64) -> MatchDetail {
+    get_as(addr, &format!("/api/v1/matches/{id}"))
 }
 
 /// Waits until worker `name` holds a match and returns it.
@@ -52,21 +53,24 @@ fn wait_holding(addr: &str, name: &str) -> i64 {
 }
 
 /// `rally match` for the same agents and seed: (points, rally lengths).
-fn played_alone(a: &str, b: &str, seed: i64) -> (Value, Vec<i64>) {
+fn played_alone(a: &str, b: &str, seed: i64) -> ([i64; 2], Vec<i64>) {
     let out = Command::new(env!("CARGO_BIN_EXE_rally"))
         .args(["match", a, b, "--json", "--rallies", &RALLIES.to_string()])
         .args(["--seed", &seed.to_string()])
         .output()
         .unwrap();
     assert!(out.status.success());
-    let r: Value = serde_json::from_slice(&out.stdout).unwrap();
-    let lengths = r["rallies"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x["length"].as_i64().unwrap())
-        .collect();
-    (r["points"].clone(), lengths)
+    #[derive(serde::Deserialize)]
+    struct Rally {
+        length: i64,
+    }
+    #[derive(serde::Deserialize)]
+    struct Played {
+        points: [i64; 2],
+        rallies: Vec<Rally>,
+    }
+    let r: Played = serde_json::from_slice(&out.stdout).unwrap();
+    (r.points, r.rallies.iter().map(|x| x.length).collect())
 }
 
 #[test]
@@ -83,20 +87,18 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
     let mut ids = Vec::new();
     for k in 0..matches {
         let (x, y) = pairs[k as usize % 2];
-        let (code, m) = call(
-            a,
-            "POST",
-            "/api/v1/matches",
-            Some(&json!({"a": x, "b": y, "rallies": RALLIES, "seed": 100 + k})),
-            Some(TOKEN),
-        );
-        assert_eq!(code, 202, "{m}");
-        ids.push(m["id"].as_i64().unwrap());
+        let q = QueueMatch {
+            a: x.into(),
+            b: y.into(),
+            rallies: RALLIES as u32,
+            seed: Some(100 + k as u64),
+        };
+        let m: server::db::Match = post_as(a, "/api/v1/matches", &q, Some(TOKEN), 202);
+        ids.push(m.id);
     }
     // The API alone plays nothing.
     std::thread::sleep(Duration::from_millis(1500));
-    let (_, m) = call(a, "GET", &format!("/api/v1/matches/{}", ids[0]), None, None);
-    assert_eq!(m["status"], "queued", "{m}");
+    assert_eq!(detail(a, ids[0]).row.status, MatchStatus::Queued);
 
     // The server tells its event stream what the other processes' workers did.
     let (mut events, _) = subscribe(a, "/api/v1/events");
@@ -125,37 +127,33 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
     let stopped = wait_holding(a, "w2");
     let status = terminate(&mut w2);
     assert!(status.success(), "exit status {status:?}");
-    let (_, m) = call(a, "GET", &format!("/api/v1/matches/{stopped}"), None, None);
+    let m = detail(a, stopped).row;
     assert_eq!(
-        (m["status"].as_str(), m["worker"].as_str()),
-        (Some("done"), Some("w2")),
-        "{m}"
+        (m.status, m.worker.as_deref()),
+        (MatchStatus::Done, Some("w2")),
+        "{m:?}"
     );
 
     // The third worker plays the rest, the killed worker's match once its lease is gone.
     let _w3 = w3.unwrap_or_else(|| start_worker(&dir, "w3"));
-    let mut done = Vec::new();
+    let mut done: Vec<MatchDetail> = Vec::new();
     for &id in &ids {
-        done.push(wait_for(a, id, "done", Duration::from_secs(600)));
+        wait_for(a, id, "done", Duration::from_secs(600));
+        done.push(detail(a, id));
     }
-    let (_, list) = call(a, "GET", "/api/v1/matches?limit=1000", None, None);
-    assert_eq!(
-        list["matches"].as_array().unwrap().len() as i64,
-        matches,
-        "no duplicate match"
-    );
+    let list: MatchList = get_as(a, "/api/v1/matches?limit=1000");
+    assert_eq!(list.matches.len() as i64, matches, "no duplicate match");
     for m in &done {
-        let log = m["rally_log"].as_array().unwrap();
-        let idx: Vec<i64> = log.iter().map(|r| r["idx"].as_i64().unwrap()).collect();
+        let idx: Vec<i64> = m.rally_log.iter().map(|r| r.idx).collect();
         assert_eq!(
             idx,
             (0..RALLIES).collect::<Vec<_>>(),
-            "every rally once: {m}"
+            "every rally once: {m:?}"
         );
     }
-    let again = done.iter().find(|m| m["id"] == killed).unwrap();
-    assert!(again["attempts"].as_i64().unwrap() >= 2, "{again}");
-    assert_ne!(again["worker"], "w1", "{again}");
+    let again = &done.iter().find(|m| m.row.id == killed).unwrap().row;
+    assert!(again.attempts >= 2, "{again:?}");
+    assert_ne!(again.worker.as_deref(), Some("w1"), "{again:?}");
 
     let mut told: Vec<i64> = Vec::new();
     let t0 = Instant::now();
@@ -167,108 +165,81 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
         let mut line = String::new();
         events.read_line(&mut line).unwrap();
         if let Some(data) = line.trim().strip_prefix("data:") {
-            let e: Value = serde_json::from_str(data.trim()).unwrap();
-            if e["kind"] == "match" && e["status"] == "done" {
-                told.push(e["id"].as_i64().unwrap());
+            let e: server::ServerEvent = serde_json::from_str(data.trim()).unwrap();
+            if e.kind == server::EventKind::Match && e.status == Some(MatchStatus::Done) {
+                told.push(e.id);
             }
         }
     }
 
     // Each store counted once, on the worker that made it.
-    let (_, w) = call(a, "GET", "/api/v1/workers", None, None);
-    let workers = w["workers"].as_array().unwrap();
-    let played: i64 = workers
-        .iter()
-        .map(|x| x["matches_played"].as_i64().unwrap())
-        .sum();
-    assert_eq!(played, matches, "{w}");
-    let get = |n: &str| workers.iter().find(|x| x["name"] == n).unwrap().clone();
-    assert_eq!(get("w2")["status"], "stopped", "{w}");
-    assert_eq!(get("w1")["alive"], false, "{w}");
-    assert_eq!(get("w3")["alive"], true, "{w}");
+    let w: WorkerList = get_as(a, "/api/v1/workers");
+    let played: i64 = w.workers.iter().map(|x| x.row.matches_played).sum();
+    assert_eq!(played, matches, "{w:?}");
+    let get = |n: &str| w.workers.iter().find(|x| x.row.name == n).unwrap();
+    assert_eq!(get("w2").row.status, WorkerStatus::Stopped, "{w:?}");
+    assert!(!get("w1").alive, "{w:?}");
+    assert!(get("w3").alive, "{w:?}");
 
     // The results are the ones `rally match` gives for the same agents and seed: the match played
     // twice, and the one finished under SIGTERM.
     for id in [killed, stopped] {
-        let m = done.iter().find(|m| m["id"] == id).unwrap();
+        let m = done.iter().find(|m| m.row.id == id).unwrap();
         let k = ids.iter().position(|&i| i == id).unwrap();
         let (x, y) = pairs[k % 2];
-        let (points, lengths) = played_alone(x, y, m["seed"].as_i64().unwrap());
-        assert_eq!(json!([m["points_a"], m["points_b"]]), points, "{m}");
-        let stored: Vec<i64> = m["rally_log"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|r| r["length"].as_i64().unwrap())
-            .collect();
-        assert_eq!(stored, lengths, "{m}");
+        let (points, lengths) = played_alone(x, y, m.row.seed);
+        assert_eq!([m.row.points_a.unwrap(), m.row.points_b.unwrap()], points);
+        let stored: Vec<i64> = m.rally_log.iter().map(|r| r.length).collect();
+        assert_eq!(stored, lengths, "{m:?}");
     }
 }
 
 /// A tournament and an SPRT, queued on `addr`; returns their ids.
 fn queue_contests(addr: &str) -> (i64, i64) {
-    let (code, t) = call(
-        addr,
-        "POST",
-        "/api/v1/tournaments",
-        Some(
-            &json!({"kind": "round_robin", "agents": ["scripted", "scripted-drive", "scripted-soft"],
-                     "rallies_per_match": 4, "rounds": 2, "seed": 70}),
-        ),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202, "{t}");
-    let (code, p) = call(
-        addr,
-        "POST",
-        "/api/v1/sprt",
-        Some(
-            &json!({"a": "scripted", "b": "scripted-soft", "rallies_per_match": 4,
-                     "max_matches": 5, "elo1": 400, "seed": 90}),
-        ),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202, "{p}");
-    (t["id"].as_i64().unwrap(), p["id"].as_i64().unwrap())
+    let t = NewTournament {
+        kind: "round_robin".into(),
+        agents: vec![
+            "scripted".into(),
+            "scripted-drive".into(),
+            "scripted-soft".into(),
+        ],
+        rallies_per_match: 4,
+        rounds: 2,
+        seed: Some(70),
+    };
+    let t: TournamentView = post_as(addr, "/api/v1/tournaments", &t, Some(TOKEN), 202);
+    let p = NewSprt {
+        rallies_per_match: 4,
+        max_matches: 5,
+        elo1: 400.0,
+        seed: Some(90),
+        ..NewSprt::new("scripted".into(), "scripted-soft".into())
+    };
+    let p: SprtView = post_as(addr, "/api/v1/sprt", &p, Some(TOKEN), 202);
+    (t.summary.id, p.row.id)
 }
 
-/// What a finished tournament and SPRT decided: the standings, every match's (seed, a, b, points),
-/// and the SPRT's status, LLR, match count and matches.
-fn contest_outcome(addr: &str, tid: i64, pid: i64) -> Value {
-    let t = poll(
+/// What a finished tournament and SPRT decided: the standings, every match's (status, seed, sides,
+/// points), and the SPRT's status, LLR, match count and matches.
+fn contest_outcome(addr: &str, tid: i64, pid: i64) -> serde_json::Value {
+    let t: TournamentView = poll_as(
         addr,
         &format!("/api/v1/tournaments/{tid}"),
         Duration::from_secs(600),
-        |v| v["progress"]["state"] == "finished",
+        |v: &TournamentView| v.summary.progress.state == ProgressState::Finished,
     );
-    let p = poll(
+    let p: SprtView = poll_as(
         addr,
         &format!("/api/v1/sprt/{pid}"),
         Duration::from_secs(600),
-        |v| v["status"] != "running",
+        |v: &SprtView| v.row.status != SprtStatus::Running,
     );
-    let games = |v: &Value| -> Vec<Value> {
-        v["matches"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|m| {
-                json!([
-                    m["status"],
-                    m["seed"],
-                    m["agent_a"],
-                    m["agent_b"],
-                    m["points_a"],
-                    m["points_b"]
-                ])
-            })
-            .collect()
-    };
+    let sprt_matches: Vec<_> = p.matches.iter().map(|m| &m.m).collect();
     json!({
-        "standings": t["standings"],
-        "tournament": games(&t),
-        "sprt": [p["status"], p["llr"], p["matches_done"]],
-        "sprt_matches": games(&p),
+        "standings": t.standings,
+        "tournament": t.matches,
+        "sprt": [p.row.status, p.row.llr, p.row.matches_done],
+        "sprt_matches": sprt_matches,
     })
 }
 

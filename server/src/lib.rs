@@ -165,15 +165,25 @@ impl Settings {
 
 /// What changed on the server, as `GET /api/v1/events` streams it (server-sent events): a match
 /// queued, started, finished, failed or cancelled, or an agent registered.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ServerEvent {
-    /// "match" or "agent".
-    pub kind: &'static str,
+    /// What it is about.
+    pub kind: EventKind,
     /// The match's or the agent's id.
     pub id: i64,
     /// A match's new status; none for agents.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub status: Option<domain::MatchStatus>,
+}
+
+/// What a [`ServerEvent`] is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EventKind {
+    /// A match (queued, running, done, failed, cancelled).
+    Match,
+    /// An agent (registered).
+    Agent,
 }
 
 /// Events kept for a slow subscriber before it starts missing some (it is told, and refreshes).
@@ -204,7 +214,7 @@ impl AppState {
     /// events, not the sender's time), and having no subscriber is fine.
     pub fn publish_match(&self, id: i64, status: domain::MatchStatus) {
         let _ = self.events.send(ServerEvent {
-            kind: "match",
+            kind: EventKind::Match,
             id,
             status: Some(status),
         });
@@ -213,7 +223,7 @@ impl AppState {
     /// Publishes that agent `id` was registered (see [`AppState::publish_match`]).
     pub fn publish_agent(&self, id: i64) {
         let _ = self.events.send(ServerEvent {
-            kind: "agent",
+            kind: EventKind::Agent,
             id,
             status: None,
         });

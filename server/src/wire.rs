@@ -354,3 +354,27 @@ pub struct SprtList {
     /// Newest first.
     pub sprts: Vec<db::Sprt>,
 }
+
+/// A worker as `GET /workers` shows it: its row, its heartbeat's age, whether its lease would still
+/// hold, and the matches it holds now.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WorkerView {
+    /// The row.
+    #[serde(flatten)]
+    pub row: db::workers::Worker,
+    /// Seconds since its last heartbeat.
+    pub seconds_since_heartbeat: f64,
+    /// Running and beating within the lease time.
+    pub alive: bool,
+    /// The matches whose lease it holds.
+    pub matches_running: Vec<i64>,
+}
+
+/// `GET /workers`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WorkerList {
+    /// The most recent heartbeat first.
+    pub workers: Vec<WorkerView>,
+    /// The lease time, s.
+    pub lease_s: f64,
+}

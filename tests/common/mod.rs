@@ -248,6 +248,53 @@ pub fn wait_for(addr: &str, id: i64, status: &str, limit: Duration) -> Value {
     }
 }
 
+/// A GET that must answer 200 with the body type the server sends (`server::wire`).
+pub fn get_as<T: serde::de::DeserializeOwned>(addr: &str, path: &str) -> T {
+    let (code, v) = call(addr, "GET", path, None, None);
+    assert_eq!(code, 200, "{path}: {v}");
+    serde_json::from_value(v.clone()).unwrap_or_else(|e| panic!("{path}: {e}: {v}"))
+}
+
+/// A POST of a request type (`server::wire`) that must answer `expect`, read as `T`.
+pub fn post_as<B: serde::Serialize, T: serde::de::DeserializeOwned>(
+    addr: &str,
+    path: &str,
+    body: &B,
+    token: Option<&str>,
+    expect: u16,
+) -> T {
+    let (code, v) = call(
+        addr,
+        "POST",
+        path,
+        Some(&serde_json::to_value(body).unwrap()),
+        token,
+    );
+    assert_eq!(code, expect, "{path}: {v}");
+    serde_json::from_value(v.clone()).unwrap_or_else(|e| panic!("{path}: {e}: {v}"))
+}
+
+/// Polls `path` (a `T`) until `done` holds.
+pub fn poll_as<T: serde::de::DeserializeOwned>(
+    addr: &str,
+    path: &str,
+    limit: Duration,
+    done: impl Fn(&T) -> bool,
+) -> T {
+    let t0 = Instant::now();
+    loop {
+        let v: T = get_as(addr, path);
+        if done(&v) {
+            return v;
+        }
+        assert!(
+            t0.elapsed() < limit,
+            "{path} did not get there in {limit:?}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 /// A DELETE with a bearer token (or none).
 pub fn delete(addr: &str, path: &str, token: Option<&str>) -> (u16, Value) {
     call(addr, "DELETE", path, None, token)
