@@ -1,12 +1,16 @@
-//! The real server (`rally serve`, a child process) on a loopback port with a real SQLite file:
-//! submit and qualify a checkpoint, play matches, read the leaderboard and replays, cancel, kill -9 in
-//! the middle of a match and restart (nothing lost, nothing counted twice), and the bad-input table.
+//! The real server (`rally serve`, a child process) on a loopback port with a real store (SQLite, or
+//! PostgreSQL on CI's second pass): submit and qualify a checkpoint, play matches, read the
+//! leaderboard and replays, cancel, kill -9 in the middle of a match and restart (nothing lost,
+//! nothing counted twice), and the bad-input table. The long flows check the raw JSON the API
+//! sends; the restart and event tests use the server's own types (`server::wire`).
 
 use std::io::BufRead;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
+use server::db;
+use server::wire::{MatchDetail, MatchList, QueueMatch};
 
 mod common;
 use common::*;
@@ -402,45 +406,32 @@ fn continuous_mode_fills_the_leaderboard() {
 fn kill_9_in_the_middle_of_a_match_loses_nothing() {
     let dir = tempdir("restart");
     let mut srv = start(&dir, false);
-    let (code, m) = call(
-        &srv.addr,
-        "POST",
-        "/api/v1/matches",
-        Some(&json!({"a": 2, "b": 3, "rallies": 150, "seed": 11})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202);
-    let id = m["id"].as_i64().unwrap();
-    wait_for(&srv.addr, id, "running", Duration::from_secs(30));
+    let q = QueueMatch {
+        a: 2.into(),
+        b: 3.into(),
+        rallies: 150,
+        seed: Some(11),
+    };
+    let m: db::Match = post_as(&srv.addr, "/api/v1/matches", &q, Some(TOKEN), 202);
+    wait_for(&srv.addr, m.id, "running", Duration::from_secs(30));
     srv.child.kill().unwrap(); // SIGKILL: no graceful shutdown
     srv.child.wait().unwrap();
     drop(srv);
 
     let srv = start(&dir, false);
-    let (_, m) = call(
-        &srv.addr,
-        "GET",
-        &format!("/api/v1/matches/{id}"),
-        None,
-        None,
-    );
+    let again: MatchDetail = get_as(&srv.addr, &format!("/api/v1/matches/{}", m.id));
     assert!(
-        ["queued", "running"].contains(&m["status"].as_str().unwrap()),
-        "re-queued: {m}"
+        [db::MatchStatus::Queued, db::MatchStatus::Running].contains(&again.row.status),
+        "re-queued: {again:?}"
     );
-    let done = wait_for(&srv.addr, id, "done", Duration::from_secs(300));
-    let log = done["rally_log"].as_array().unwrap();
-    assert_eq!(log.len(), 150, "every rally stored exactly once");
-    let idx: Vec<i64> = log.iter().map(|r| r["idx"].as_i64().unwrap()).collect();
+    wait_for(&srv.addr, m.id, "done", Duration::from_secs(300));
+    let done: MatchDetail = get_as(&srv.addr, &format!("/api/v1/matches/{}", m.id));
+    assert_eq!(done.rally_log.len(), 150, "every rally stored exactly once");
+    let idx: Vec<i64> = done.rally_log.iter().map(|r| r.idx).collect();
     assert_eq!(idx, (0..150).collect::<Vec<_>>());
-    let points = done["points_a"].as_i64().unwrap() + done["points_b"].as_i64().unwrap();
-    assert!(points <= 150);
-    let (_, list) = call(&srv.addr, "GET", "/api/v1/matches", None, None);
-    assert_eq!(
-        list["matches"].as_array().unwrap().len(),
-        1,
-        "no duplicate match"
-    );
+    assert!(done.row.points_a.unwrap() + done.row.points_b.unwrap() <= 150);
+    let list: MatchList = get_as(&srv.addr, "/api/v1/matches");
+    assert_eq!(list.matches.len(), 1, "no duplicate match");
 }
 
 #[test]
@@ -991,23 +982,22 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
 fn sigterm_shuts_down_gracefully_and_loses_nothing() {
     let dir = tempdir("sigterm");
     let mut srv = start(&dir, false);
-    let (code, m) = call(
-        &srv.addr,
-        "POST",
-        "/api/v1/matches",
-        Some(&json!({"a": 1, "b": 2, "rallies": 40, "seed": 5})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202);
-    let id = m["id"].as_i64().unwrap();
-    wait_for(&srv.addr, id, "running", Duration::from_secs(30));
+    let q = QueueMatch {
+        a: 1.into(),
+        b: 2.into(),
+        rallies: 40,
+        seed: Some(5),
+    };
+    let m: db::Match = post_as(&srv.addr, "/api/v1/matches", &q, Some(TOKEN), 202);
+    wait_for(&srv.addr, m.id, "running", Duration::from_secs(30));
     let status = terminate(&mut srv);
     assert!(status.success(), "exit status {status:?}");
     drop(srv);
     // The running match was finished before exit (or, at worst, is re-queued): never lost.
     let srv = start(&dir, false);
-    let done = wait_for(&srv.addr, id, "done", Duration::from_secs(120));
-    assert_eq!(done["rally_log"].as_array().unwrap().len(), 40);
+    wait_for(&srv.addr, m.id, "done", Duration::from_secs(120));
+    let done: MatchDetail = get_as(&srv.addr, &format!("/api/v1/matches/{}", m.id));
+    assert_eq!(done.rally_log.len(), 40);
 }
 
 /// A multipart/form-data body with text fields and one file field.
@@ -1568,15 +1558,14 @@ fn the_event_stream_tells_a_match_queued_running_and_done() {
         head.to_ascii_lowercase().contains("text/event-stream"),
         "{head}"
     );
-    let (code, m) = call(
-        a,
-        "POST",
-        "/api/v1/matches",
-        Some(&json!({"a": "scripted", "b": "scripted-soft", "rallies": 2, "seed": 3})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202, "{m}");
-    let id = m["id"].as_i64().unwrap();
+    let q = QueueMatch {
+        a: "scripted".into(),
+        b: "scripted-soft".into(),
+        rallies: 2,
+        seed: Some(3),
+    };
+    let m: db::Match = post_as(a, "/api/v1/matches", &q, Some(TOKEN), 202);
+    let id = m.id;
     let mut seen = Vec::new();
     let started = Instant::now();
     while !seen.contains(&"done".to_string()) {
@@ -1588,9 +1577,9 @@ fn the_event_stream_tells_a_match_queued_running_and_done() {
         reader.read_line(&mut line).unwrap();
         // Chunked framing lines and keep-alives are skipped; data lines carry the JSON.
         if let Some(data) = line.trim().strip_prefix("data:") {
-            let e: Value = serde_json::from_str(data.trim()).unwrap();
-            if e["kind"] == "match" && e["id"] == id {
-                seen.push(e["status"].as_str().unwrap().to_string());
+            let e: server::ServerEvent = serde_json::from_str(data.trim()).unwrap();
+            if e.kind == server::EventKind::Match && e.id == id {
+                seen.push(e.status.unwrap().to_string());
             }
         }
     }
@@ -1601,8 +1590,8 @@ fn the_event_stream_tells_a_match_queued_running_and_done() {
     assert_eq!(sorted, ["done", "queued", "running"], "{seen:?}");
     assert_eq!(seen.last().unwrap(), "done");
     // And the match is stored as done when the event says so.
-    let (_, got) = call(a, "GET", &format!("/api/v1/matches/{id}"), None, None);
-    assert_eq!(got["status"], "done");
+    let got: MatchDetail = get_as(a, &format!("/api/v1/matches/{id}"));
+    assert_eq!(got.row.status, db::MatchStatus::Done);
 }
 
 #[test]
