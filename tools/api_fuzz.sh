@@ -4,6 +4,8 @@
 # checks: no 5xx, every status code, content type, header and body as the document says. The two
 # server-sent-event streams (/events, /matches/{id}/live) never end and are left out.
 # Usage: tools/api_fuzz.sh RALLY_BINARY SCHEMATHESIS [SECONDS]
+# RALLY_TEST_DB, if set, is the server's store instead of a scratch SQLite file (an empty PostgreSQL
+# database's URL: CI fuzzes both engines).
 set -euo pipefail
 rally="$1"
 st="$2"
@@ -11,7 +13,7 @@ seconds="${3:-90}"
 dir="$(mktemp -d)"
 cat >"$dir/server.toml" <<TOML
 addr = "127.0.0.1:0"
-db = "$dir/rally.db"
+db = "${RALLY_TEST_DB:-$dir/rally.db}"
 workers = 1
 continuous = false
 continuous_rallies = 4

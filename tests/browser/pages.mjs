@@ -28,7 +28,7 @@ const check = (ok, what) => {
 // --- the server
 const dir = mkdtempSync(join(tmpdir(), 'rally-browser-'));
 writeFileSync(join(dir, 'server.toml'), `addr = "127.0.0.1:0"
-db = "${join(dir, 'rally.db')}"
+db = "${process.env.RALLY_TEST_DB || join(dir, 'rally.db')}"
 workers = 1
 continuous = false
 continuous_rallies = 4
