@@ -210,6 +210,16 @@ pub async fn store_result(
     replay: &::agents::matchrun::Replay,
 ) -> sqlx::Result<Stored> {
     let id = lease.match_id;
+    // The replay frames are compressed before the transaction: the write lock (SQLite's only one)
+    // is held for the inserts, not for gzip.
+    let frames: Vec<(i64, Vec<u8>)> = r
+        .rallies
+        .iter()
+        .filter_map(|rally| {
+            let f = replay.get(rally.index as usize).filter(|f| !f.is_empty())?;
+            Some((rally.index as i64, gzip_json(f)))
+        })
+        .collect();
     // The first statement writes, so the transaction takes the write lock at once (waiting out other
     // writers) instead of upgrading a read lock later.
     let mut tx = pool.begin().await?;
@@ -307,14 +317,14 @@ pub async fn store_result(
                 .execute(&mut *tx)
                 .await?;
         }
-        if let Some(frames) = replay.get(rally.index as usize).filter(|f| !f.is_empty()) {
-            sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES ($1, $2, $3)")
-                .bind(id)
-                .bind(rally.index as i64)
-                .bind(gzip_json(frames))
-                .execute(&mut *tx)
-                .await?;
-        }
+    }
+    for (rally, blob) in frames {
+        sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES ($1, $2, $3)")
+            .bind(id)
+            .bind(rally)
+            .bind(blob)
+            .execute(&mut *tx)
+            .await?;
     }
     if let Some(sprt) = sprt_id {
         sprt_step(&mut tx, sprt).await?;
