@@ -59,8 +59,8 @@ impl FromStr for Location {
             return Err("the database is empty: give a file path or a postgres:// URL".into());
         }
         if s.starts_with("postgres://") || s.starts_with("postgresql://") {
-            let url = url_host(s);
-            if url.is_empty() {
+            let ok = url::Url::parse(s).is_ok_and(|u| u.host_str().is_some_and(|h| !h.is_empty()));
+            if !ok {
                 return Err(format!(
                     "{}: no host in the PostgreSQL URL (postgres://USER:PASS@HOST:PORT/DB)",
                     Location::Postgres(s.into())
@@ -83,11 +83,14 @@ impl FromStr for Location {
     }
 }
 
-/// The host part of a URL (`USER:PASS@HOST:PORT/DB` → `HOST:PORT`).
-fn url_host(url: &str) -> &str {
-    let rest = url.split_once("://").map_or(url, |(_, r)| r);
-    let rest = rest.split(['/', '?']).next().unwrap_or("");
-    rest.rsplit_once('@').map_or(rest, |(_, h)| h)
+impl Location {
+    /// The text that names this store on a command line (`--db`), password included.
+    pub fn arg(&self) -> String {
+        match self {
+            Location::Sqlite(p) => p.display().to_string(),
+            Location::Postgres(url) => url.clone(),
+        }
+    }
 }
 
 impl std::fmt::Display for Location {
@@ -95,16 +98,13 @@ impl std::fmt::Display for Location {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Location::Sqlite(p) => write!(f, "{}", p.display()),
-            Location::Postgres(url) => {
-                let (scheme, rest) = url.split_once("://").unwrap_or(("postgres", url));
-                match rest.split_once('@') {
-                    Some((user, tail)) if !tail.contains('@') || user.contains(':') => {
-                        let user = user.split(':').next().unwrap_or("");
-                        write!(f, "{scheme}://{user}:***@{tail}")
-                    }
-                    _ => write!(f, "{url}"),
+            Location::Postgres(text) => match url::Url::parse(text) {
+                Ok(mut u) if u.password().is_some() => {
+                    let _ = u.set_password(Some("***"));
+                    write!(f, "{u}")
                 }
-            }
+                _ => write!(f, "{text}"),
+            },
         }
     }
 }

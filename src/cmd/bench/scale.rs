@@ -53,14 +53,6 @@ impl Stores<'_> {
             }
         })
     }
-
-    /// The store's text for `--db`.
-    fn arg(location: &server::db::Location) -> String {
-        match location {
-            server::db::Location::Sqlite(p) => p.display().to_string(),
-            server::db::Location::Postgres(url) => url.clone(),
-        }
-    }
 }
 
 /// Claim and store `OVERHEAD_MATCHES` one-rally matches in a fresh store (the same played record
@@ -150,7 +142,7 @@ fn throughput(
     board: Option<f64>,
 ) -> anyhow::Result<(f64, Option<Value>)> {
     let tag = format!("s{in_server}-w{processes}");
-    let db = Stores::arg(&stores.fresh(&tag)?);
+    let db = stores.fresh(&tag)?.arg();
     let config = dir.join(format!("{}-{tag}.toml", stores.engine()));
     let settings = server::DEFAULT_SETTINGS_TOML
         .lines()
