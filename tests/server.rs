@@ -1,16 +1,23 @@
 //! The real server (`rally serve`, a child process) on a loopback port with a real store (SQLite, or
 //! PostgreSQL on CI's second pass): submit and qualify a checkpoint, play matches, read the
 //! leaderboard and replays, cancel, kill -9 in the middle of a match and restart (nothing lost,
-//! nothing counted twice), and the bad-input table. The long flows check the raw JSON the API
-//! sends; the restart and event tests use the server's own types (`server::wire`).
+//! nothing counted twice), and the bad-input table. Requests and answers go through the server's
+//! own types (`server::wire`), so a field the server stops sending fails here; the bad-input table
+//! sends raw bytes on purpose, and the drawings (arena, model, replay frames) stay JSON.
 
 use std::io::BufRead;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
-use server::db;
-use server::wire::{MatchDetail, MatchList, QueueMatch};
+use server::db::{self, AgentKind, MatchStatus, SprtStatus};
+use server::ratings::Leaderboard;
+use server::tournament::ProgressState;
+use server::wire::{
+    AgentCrossings, AgentDetail, AgentList, ErrorBody, Health, IssuedToken, MatchDetail, MatchList,
+    NewSprt, NewToken, NewTournament, QueueMatch, RatingHistory, SprtView, SubmitAgent, Submitted,
+    TournamentList, TournamentView,
+};
 
 mod common;
 use common::*;
@@ -30,19 +37,19 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     let srv = start(&dir, false);
     let a = srv.addr.as_str();
 
-    let (code, h) = call(a, "GET", "/api/v1/healthz", None, None);
-    assert_eq!((code, h["status"].as_str()), (200, Some("ok")));
-    // The pages draw the simulator's own arena.
+    let h: Health = get_as(a, "/api/v1/healthz");
+    assert_eq!(h.status, "ok");
+    // The pages draw the simulator's own arena (a drawing's shape: JSON, no wire type).
     let (code, arena) = call(a, "GET", "/api/v1/arena", None, None);
     assert_eq!(code, 200);
     assert_eq!(arena["table"]["y"], json!([-0.72, 0.8]), "{arena}");
     assert_eq!(arena["table"]["top_z"], 0.795);
     assert_eq!(arena["net"]["top_z"], 0.9475);
     assert_eq!(arena["paddle"]["blade"]["radius"], 0.093);
-    assert_eq!(arena["sim_version"], h["sim_version"]);
-    let (_, agents) = call(a, "GET", "/api/v1/agents", None, None);
-    let builtins = agents["agents"].as_array().unwrap().len();
-    assert!(builtins >= 3, "{agents}");
+    assert_eq!(arena["sim_version"], h.sim_version.as_str());
+    let agents: AgentList = get_as(a, "/api/v1/agents");
+    let builtins = agents.agents.len();
+    assert!(builtins >= 3, "{agents:?}");
     // Every committed checkpoint is a built-in agent beside the scripted ones, qualified.
     let committed: Vec<String> = std::fs::read_dir("config/checkpoints")
         .unwrap()
@@ -53,88 +60,55 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         .collect();
     assert!(committed.iter().any(|n| n == "kmac"), "{committed:?}");
     for name in &committed {
-        let row = agents["agents"]
-            .as_array()
-            .unwrap()
+        let row = agents
+            .agents
             .iter()
-            .find(|x| x["name"] == name.as_str())
-            .unwrap_or_else(|| panic!("built-in checkpoint {name} missing: {agents}"));
+            .find(|x| &x.name == name)
+            .unwrap_or_else(|| panic!("built-in checkpoint {name} missing: {agents:?}"));
         assert_eq!(
-            (row["builtin"].as_bool(), row["kind"].as_str()),
-            (Some(true), Some("checkpoint")),
-            "{row}"
+            (row.builtin, row.kind),
+            (true, AgentKind::Checkpoint),
+            "{row:?}"
         );
-        assert_eq!(row["qual_episodes"], 6, "{row}");
-        assert!(row["hit_rate"].as_f64().is_some() && row["effort"].as_f64().is_some());
+        assert_eq!(row.qual_episodes, Some(6), "{row:?}");
+        assert!(row.hit_rate.is_some() && row.effort.is_some());
         // Its page shows the learning curve the checkpoint carries.
-        let (_, one) = call(
-            a,
-            "GET",
-            &format!("/api/v1/agents/{}", row["id"]),
-            None,
-            None,
-        );
+        let one: AgentDetail = get_as(a, &format!("/api/v1/agents/{}", row.id));
+        let curve = one.training.as_ref().map(|t| &t["curve"]);
         assert!(
-            !one["training"]["curve"].as_array().unwrap().is_empty(),
+            curve
+                .and_then(Value::as_array)
+                .is_some_and(|c| !c.is_empty()),
             "{name}: no curve"
         );
-        assert_eq!(one["rally_lengths"], json!([]));
+        assert!(one.rally_lengths.is_empty());
     }
-    assert_eq!(builtins, 3 + committed.len(), "{agents}");
+    assert_eq!(builtins, 3 + committed.len(), "{agents:?}");
 
     // Submit and qualify a checkpoint.
-    let (code, sub) = call(
-        a,
-        "POST",
-        "/api/v1/agents",
-        Some(&json!({"name": "zero-policy", "checkpoint": template("zero")})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 201, "{sub}");
-    assert_eq!(sub["qualification"]["episodes"], 6);
-    let cid = sub["agent"]["id"].as_i64().unwrap();
-    let (code, got) = call(a, "GET", &format!("/api/v1/agents/{cid}"), None, None);
-    assert_eq!(code, 200);
-    assert_eq!(got["name"], "zero-policy");
-    assert!(got["hit_rate"].as_f64().unwrap() >= 0.0);
+    let zero = SubmitAgent {
+        name: "zero-policy".into(),
+        checkpoint: template("zero"),
+    };
+    let sub: Submitted = post_as(a, "/api/v1/agents", &zero, Some(TOKEN), 201);
+    assert_eq!(sub.qualification.episodes, 6);
+    let cid = sub.agent.id;
+    let got: AgentDetail = get_as(a, &format!("/api/v1/agents/{cid}"));
+    assert_eq!(got.row.name, "zero-policy");
+    assert!(got.row.hit_rate.unwrap() >= 0.0);
 
     // The admin issues a submitter token; it can submit but not issue tokens; only its hash is stored.
-    let (code, t) = call(
-        a,
-        "POST",
-        "/api/v1/tokens",
-        Some(&json!({"name": "lab-1"})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 201, "{t}");
-    let token = t["token"].as_str().unwrap().to_string();
-    let (code, e) = call(
-        a,
-        "POST",
-        "/api/v1/tokens",
-        Some(&json!({"name": "lab-2"})),
-        Some(&token),
-    );
-    assert_eq!(
-        (code, e["error"]["code"].as_str()),
-        (403, Some("admin_only"))
-    );
-    let (code, e) = call(
-        a,
-        "POST",
-        "/api/v1/tokens",
-        Some(&json!({"name": "lab-1"})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 409, "{e}");
-    let (code, sub2) = call(
-        a,
-        "POST",
-        "/api/v1/agents",
-        Some(&json!({"name": "lab-1-policy", "checkpoint": template("lab")})),
-        Some(&token),
-    );
-    assert_eq!(code, 201, "{sub2}");
+    let lab = |name: &str| NewToken { name: name.into() };
+    let t: IssuedToken = post_as(a, "/api/v1/tokens", &lab("lab-1"), Some(TOKEN), 201);
+    let token = t.token;
+    let e: ErrorBody = post_as(a, "/api/v1/tokens", &lab("lab-2"), Some(&token), 403);
+    assert_eq!(e.error.code, "admin_only");
+    let _: ErrorBody = post_as(a, "/api/v1/tokens", &lab("lab-1"), Some(TOKEN), 409);
+    let policy = SubmitAgent {
+        name: "lab-1-policy".into(),
+        checkpoint: template("lab"),
+    };
+    let _: Submitted = post_as(a, "/api/v1/agents", &policy, Some(&token), 201);
     let needle = token.as_bytes();
     for bytes in stored_bytes(&dir) {
         assert!(
@@ -143,18 +117,17 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         );
     }
 
-    let (code, m) = call(
-        a,
-        "POST",
-        "/api/v1/matches",
-        Some(&json!({"a": 1, "b": 2, "rallies": 6, "seed": 7})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202, "{m}");
-    let id = m["id"].as_i64().unwrap();
-    let done = wait_for(a, id, "done", Duration::from_secs(120));
-    let log = done["rally_log"].as_array().unwrap();
-    assert_eq!(log.len(), 6);
+    let queue = |x: i64, y: i64, rallies: u32, seed: u64| QueueMatch {
+        a: x.into(),
+        b: y.into(),
+        rallies,
+        seed: Some(seed),
+    };
+    let m: db::Match = post_as(a, "/api/v1/matches", &queue(1, 2, 6, 7), Some(TOKEN), 202);
+    let id = m.id;
+    wait_for(a, id, "done", Duration::from_secs(120));
+    let done: MatchDetail = get_as(a, &format!("/api/v1/matches/{id}"));
+    assert_eq!(done.rally_log.len(), 6);
     let cli = Command::new(env!("CARGO_BIN_EXE_rally"))
         .args([
             "match",
@@ -169,15 +142,20 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         .output()
         .unwrap();
     let cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
-    assert_eq!(cli["points"], json!([done["points_a"], done["points_b"]]));
-    for (x, y) in cli["rallies"].as_array().unwrap().iter().zip(log) {
-        assert_eq!(x["length"], y["length"]);
-        assert_eq!(x["end"], y["end_reason"]);
-        assert_eq!(x["duration"], y["duration"], "durations are bit-identical");
+    assert_eq!(cli["points"], json!([done.row.points_a, done.row.points_b]));
+    for (x, y) in cli["rallies"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(&done.rally_log)
+    {
+        assert_eq!(x["length"], y.length);
+        assert_eq!(x["end"], y.end_reason.as_str());
+        assert_eq!(x["duration"], y.duration, "durations are bit-identical");
     }
     assert_eq!(
         cli["drift"]["energy_distance"],
-        done["drift"]["energy_distance"]
+        done.drift.as_ref().unwrap()["energy_distance"]
     );
 
     // Replay frames, gzip on request.
@@ -209,55 +187,25 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
     assert_eq!(code, 400);
 
     // The checkpoint plays too, and everything shows on the leaderboard.
-    let (_, m2) = call(
-        a,
-        "POST",
-        "/api/v1/matches",
-        Some(&json!({"a": cid, "b": 3, "rallies": 4, "seed": 1})),
-        Some(TOKEN),
-    );
-    wait_for(
-        a,
-        m2["id"].as_i64().unwrap(),
-        "done",
-        Duration::from_secs(120),
-    );
-    let (code, board) = call(a, "GET", "/api/v1/leaderboard", None, None);
-    assert_eq!(code, 200);
-    assert_eq!(board["matches"], 2);
+    let m2: db::Match = post_as(a, "/api/v1/matches", &queue(cid, 3, 4, 1), Some(TOKEN), 202);
+    wait_for(a, m2.id, "done", Duration::from_secs(120));
+    let board: Leaderboard = get_as(a, "/api/v1/leaderboard");
+    assert_eq!(board.matches, 2);
     // The agent page's data: its rally lengths, and no training provenance (a template).
-    let (_, got) = call(a, "GET", &format!("/api/v1/agents/{cid}"), None, None);
-    let lengths = got["rally_lengths"].as_array().unwrap();
-    let total: i64 = lengths.iter().map(|r| r["rallies"].as_i64().unwrap()).sum();
-    assert_eq!(total, 4, "{got}");
-    assert!(got["training"].is_null(), "{got}");
-    let rows = board["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), builtins + 2);
-    for r in rows {
-        let played = r["matches"].as_u64().unwrap();
-        assert_eq!(
-            played > 0,
-            r["glicko2_deviation"].as_f64().unwrap() < 350.0,
-            "{r}"
-        );
-        assert_eq!(played > 0, r["rating_low"].is_number(), "{r}");
-        if played > 0 {
-            assert!(
-                r["rating_low"].as_f64() <= r["rating"].as_f64()
-                    && r["rating"].as_f64() <= r["rating_high"].as_f64(),
-                "{r}"
-            );
+    let got: AgentDetail = get_as(a, &format!("/api/v1/agents/{cid}"));
+    let total: i64 = got.rally_lengths.iter().map(|r| r.rallies).sum();
+    assert_eq!(total, 4, "{got:?}");
+    assert!(got.training.is_none(), "{got:?}");
+    assert_eq!(board.rows.len(), builtins + 2);
+    for r in &board.rows {
+        assert_eq!(r.matches > 0, r.glicko2_deviation < 350.0, "{r:?}");
+        assert_eq!(r.matches > 0, r.rating_low.is_some(), "{r:?}");
+        if let (Some(low), Some(high)) = (r.rating_low, r.rating_high) {
+            assert!(low <= r.rating && r.rating <= high, "{r:?}");
         }
     }
-    let (code, list) = call(
-        a,
-        "GET",
-        &format!("/api/v1/matches?agent={cid}&status=done"),
-        None,
-        None,
-    );
-    assert_eq!(code, 200);
-    assert_eq!(list["matches"].as_array().unwrap().len(), 1);
+    let list: MatchList = get_as(a, &format!("/api/v1/matches?agent={cid}&status=done"));
+    assert_eq!(list.matches.len(), 1);
 
     // Cancelling: a finished match cannot be; a queued or running one can, and stays cancelled.
     let (code, e) = delete(a, &format!("/api/v1/matches/{id}"), Some(TOKEN));
@@ -265,23 +213,14 @@ fn submit_qualify_match_leaderboard_replay_cancel() {
         (code, e["error"]["code"].as_str()),
         (409, Some("not_cancellable"))
     );
-    let (_, long) = call(
-        a,
-        "POST",
-        "/api/v1/matches",
-        Some(&json!({"a": 1, "b": 3, "rallies": 300, "seed": 3})),
-        Some(TOKEN),
-    );
-    let lid = long["id"].as_i64().unwrap();
-    let (code, c) = delete(a, &format!("/api/v1/matches/{lid}"), Some(TOKEN));
-    assert_eq!(
-        (code, c["status"].as_str()),
-        (200, Some("cancelled")),
-        "{c}"
-    );
+    let long: db::Match = post_as(a, "/api/v1/matches", &queue(1, 3, 300, 3), Some(TOKEN), 202);
+    let (code, c) = delete(a, &format!("/api/v1/matches/{}", long.id), Some(TOKEN));
+    assert_eq!(code, 200, "{c}");
+    let c: db::Match = serde_json::from_value(c).unwrap();
+    assert_eq!(c.status, MatchStatus::Cancelled);
     std::thread::sleep(Duration::from_millis(300));
-    let (_, after) = call(a, "GET", &format!("/api/v1/matches/{lid}"), None, None);
-    assert_eq!(after["status"], "cancelled");
+    let after: MatchDetail = get_as(a, &format!("/api/v1/matches/{}", long.id));
+    assert_eq!(after.row.status, MatchStatus::Cancelled);
 
     // Metrics and the page.
     let (code, metrics) = raw(a, "GET", "/api/v1/metrics", &[], b"");
@@ -312,58 +251,37 @@ fn continuous_mode_fills_the_leaderboard() {
     let srv = start(&dir, true);
     let t0 = Instant::now();
     loop {
-        let (_, board) = call(&srv.addr, "GET", "/api/v1/leaderboard", None, None);
+        let board: Leaderboard = get_as(&srv.addr, "/api/v1/leaderboard");
         // Two workers queue concurrently, so an agent can be picked twice before another once:
         // after twice as many matches as agents, every built-in has played (the most uncertain
         // agent is picked first).
-        let agents = board["rows"].as_array().unwrap().len() as u64;
-        if board["matches"].as_u64().unwrap() >= 2 * agents {
-            assert!(
-                board["rows"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .all(|r| r["matches"].as_u64().unwrap() > 0),
-                "{board}"
-            );
+        if board.matches >= 2 * board.rows.len() {
+            assert!(board.rows.iter().all(|r| r.matches > 0), "{board:?}");
             // Continuous-mode matches keep no frames: the replay is re-simulated, and equals the
             // frames `rally match` writes for the same agents and seed.
-            let (_, list) = call(
-                &srv.addr,
-                "GET",
-                "/api/v1/matches?status=done&limit=1",
-                None,
-                None,
-            );
-            let m = &list["matches"][0];
-            let id = m["id"].as_i64().unwrap();
-            assert_eq!(m["keep_replay"], false, "{m}");
+            let list: MatchList = get_as(&srv.addr, "/api/v1/matches?status=done&limit=1");
+            let m = &list.matches[0];
+            assert!(!m.keep_replay, "{m:?}");
             let (code, r) = call(
                 &srv.addr,
                 "GET",
-                &format!("/api/v1/matches/{id}/replay?rally=1"),
+                &format!("/api/v1/matches/{}/replay?rally=1", m.id),
                 None,
                 None,
             );
             assert_eq!((code, r["resimulated"].as_bool()), (200, Some(true)), "{r}");
-            let name = |agent: &Value| {
-                let (_, a) = call(
-                    &srv.addr,
-                    "GET",
-                    &format!("/api/v1/agents/{agent}"),
-                    None,
-                    None,
-                );
-                a["name"].as_str().unwrap().to_string()
+            let name = |agent: i64| {
+                let a: AgentDetail = get_as(&srv.addr, &format!("/api/v1/agents/{agent}"));
+                a.row.name
             };
             let file = dir.join("cli-replay.json");
             let out = Command::new(env!("CARGO_BIN_EXE_rally"))
-                .args(["match", &name(&m["agent_a"]), &name(&m["agent_b"])])
+                .args(["match", &name(m.agent_a), &name(m.agent_b)])
                 .args([
                     "--rallies",
-                    &m["rallies"].to_string(),
+                    &m.rallies.to_string(),
                     "--seed",
-                    &m["seed"].to_string(),
+                    &m.seed.to_string(),
                 ])
                 .arg("--replay")
                 .arg(&file)
@@ -396,12 +314,11 @@ fn continuous_mode_fills_the_leaderboard() {
         }
         assert!(
             t0.elapsed() < Duration::from_secs(60),
-            "the leaderboard did not fill within a minute: {board}"
+            "the leaderboard did not fill within a minute: {board:?}"
         );
         std::thread::sleep(Duration::from_millis(200));
     }
 }
-
 #[test]
 fn kill_9_in_the_middle_of_a_match_loses_nothing() {
     let dir = tempdir("restart");
@@ -438,56 +355,49 @@ fn kill_9_in_the_middle_of_a_match_loses_nothing() {
 fn kill_9_during_an_sprt_neither_loses_nor_forks_it() {
     let dir = tempdir("sprt-restart");
     let mut srv = start(&dir, false);
-    let (code, p) = call(
-        &srv.addr,
-        "POST",
-        "/api/v1/sprt",
-        Some(
-            &json!({"a": 1, "b": 2, "rallies_per_match": 40, "max_matches": 4, "elo1": 400, "seed": 20}),
-        ),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202, "{p}");
-    let pid = p["id"].as_i64().unwrap();
+    let test = NewSprt {
+        elo1: 400.0,
+        rallies_per_match: 40,
+        max_matches: 4,
+        seed: Some(20),
+        ..NewSprt::new(1.into(), 2.into())
+    };
+    let p: SprtView = post_as(&srv.addr, "/api/v1/sprt", &test, Some(TOKEN), 202);
+    let path = format!("/api/v1/sprt/{}", p.row.id);
     // Kill it while its second match is being played.
     let t0 = Instant::now();
     loop {
-        let (_, v) = call(&srv.addr, "GET", &format!("/api/v1/sprt/{pid}"), None, None);
-        let ms = v["matches"].as_array().unwrap();
-        if ms.len() == 2 && ms[1]["status"] == "running" {
+        let v: SprtView = get_as(&srv.addr, &path);
+        if v.matches.len() == 2 && v.matches[1].m.status == MatchStatus::Running {
             break;
         }
-        assert!(v["status"] == "running", "ended before the kill: {v}");
-        assert!(t0.elapsed() < Duration::from_secs(60), "{v}");
+        assert_eq!(
+            v.row.status,
+            SprtStatus::Running,
+            "ended before the kill: {v:?}"
+        );
+        assert!(t0.elapsed() < Duration::from_secs(60), "{v:?}");
         std::thread::sleep(Duration::from_millis(20));
     }
     srv.child.kill().unwrap();
     srv.child.wait().unwrap();
     drop(srv);
     let srv = start(&dir, false);
-    let p = poll(
+    let p: SprtView = poll_as(
         &srv.addr,
-        &format!("/api/v1/sprt/{pid}"),
+        &path,
         Duration::from_secs(120),
-        |v| v["status"] != "running",
+        |v: &SprtView| v.row.status != SprtStatus::Running,
     );
     // One match per step, seeds 20, 21, … in order, sides alternating, all done: as if never killed.
-    let ms = p["matches"].as_array().unwrap();
-    assert_eq!(ms.len() as i64, p["matches_done"].as_i64().unwrap(), "{p}");
-    for (k, m) in ms.iter().enumerate() {
-        assert_eq!(m["status"], "done", "{p}");
-        assert_eq!(m["seed"].as_i64().unwrap(), 20 + k as i64);
-        assert_eq!(
-            m["agent_a"].as_i64().unwrap(),
-            if k % 2 == 0 { 1 } else { 2 }
-        );
+    assert_eq!(p.matches.len() as i64, p.row.matches_done, "{p:?}");
+    for (k, m) in p.matches.iter().enumerate() {
+        assert_eq!(m.m.status, MatchStatus::Done, "{p:?}");
+        assert_eq!(m.m.seed, 20 + k as i64);
+        assert_eq!(m.m.agent_a, if k % 2 == 0 { 1 } else { 2 });
     }
-    let (_, all) = call(&srv.addr, "GET", "/api/v1/matches", None, None);
-    assert_eq!(
-        all["matches"].as_array().unwrap().len(),
-        ms.len(),
-        "no stray match"
-    );
+    let all: MatchList = get_as(&srv.addr, "/api/v1/matches");
+    assert_eq!(all.matches.len(), p.matches.len(), "no stray match");
 }
 
 /// What, method, path, headers, body, expected status.
@@ -1031,24 +941,12 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         "max_matches_per_minute = 8\nmax_agents_per_hour = 1\nbuiltin_checkpoints = \"\"\n",
     );
     let a = srv.addr.as_str();
-    let (code, t) = call(
-        a,
-        "POST",
-        "/api/v1/tokens",
-        Some(&json!({"name": "lab"})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 201, "{t}");
-    let token = t["token"].as_str().unwrap().to_string();
+    let lab = |name: &str| NewToken { name: name.into() };
+    let t: IssuedToken = post_as(a, "/api/v1/tokens", &lab("lab"), Some(TOKEN), 201);
+    let token = t.token;
     let bearer = format!("Bearer {token}");
-    let (_, t2) = call(
-        a,
-        "POST",
-        "/api/v1/tokens",
-        Some(&json!({"name": "other-lab"})),
-        Some(TOKEN),
-    );
-    let other = t2["token"].as_str().unwrap().to_string();
+    let t2: IssuedToken = post_as(a, "/api/v1/tokens", &lab("other-lab"), Some(TOKEN), 201);
+    let other = t2.token;
 
     // A checkpoint uploaded as a multipart form by the submitter token.
     let body = multipart(
@@ -1070,53 +968,44 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         ],
         &body,
     );
-    let v: Value = serde_json::from_slice(&resp).unwrap();
-    assert_eq!(code, 201, "{v}");
-    assert_eq!(v["agent"]["name"], "uploaded");
-    assert_eq!(v["qualification"]["episodes"], 6);
+    assert_eq!(code, 201, "{}", String::from_utf8_lossy(&resp));
+    let v: Submitted = serde_json::from_slice(&resp).unwrap();
+    assert_eq!(v.agent.name, "uploaded");
+    assert_eq!(v.qualification.episodes, 6);
     // One agent an hour for this token: a second valid one is refused, before any qualification.
-    let (code, e) = call(
-        a,
-        "POST",
-        "/api/v1/agents",
-        Some(&json!({"name": "second", "checkpoint": template("second")})),
-        Some(&token),
-    );
-    assert_eq!(
-        (code, e["error"]["code"].as_str()),
-        (429, Some("rate_limited")),
-        "{e}"
-    );
-    let (_, listed) = call(a, "GET", "/api/v1/agents", None, None);
-    assert_eq!(listed["agents"].as_array().unwrap().len(), 4, "{listed}");
+    let second = SubmitAgent {
+        name: "second".into(),
+        checkpoint: template("second"),
+    };
+    let e: ErrorBody = post_as(a, "/api/v1/agents", &second, Some(&token), 429);
+    assert_eq!(e.error.code, "rate_limited");
+    let listed: AgentList = get_as(a, "/api/v1/agents");
+    assert_eq!(listed.agents.len(), 4, "{listed:?}");
 
     // A round robin of the three built-ins, two rounds: 6 matches, charged to the token (6 of 8).
-    let (code, t) = call(
-        a,
-        "POST",
-        "/api/v1/tournaments",
-        Some(
-            &json!({"kind": "round_robin", "agents": ["scripted", 2, "scripted-soft"], "rallies_per_match": 3, "rounds": 2, "seed": 40}),
-        ),
-        Some(&token),
-    );
-    assert_eq!(code, 202, "{t}");
-    let tid = t["id"].as_i64().unwrap();
-    assert_eq!(t["progress"]["total"], 6);
-    let seeds: Vec<i64> = t["matches"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|m| m["seed"].as_i64().unwrap())
-        .collect();
+    let rr = NewTournament {
+        kind: "round_robin".into(),
+        agents: vec!["scripted".into(), 2.into(), "scripted-soft".into()],
+        rallies_per_match: 3,
+        rounds: 2,
+        seed: Some(40),
+    };
+    let t: TournamentView = post_as(a, "/api/v1/tournaments", &rr, Some(&token), 202);
+    let tid = t.summary.id;
+    assert_eq!(t.summary.progress.total, 6);
+    let seeds: Vec<i64> = t.matches.iter().map(|m| m.seed).collect();
     assert_eq!(seeds, (40..46).collect::<Vec<i64>>());
 
     // The rate limit: two more matches fit in the minute, the third is refused with Retry-After and
     // writes nothing; the admin is not limited.
-    let q = json!({"a": 1, "b": 2, "rallies": 1, "seed": 1});
+    let q = QueueMatch {
+        a: 1.into(),
+        b: 2.into(),
+        rallies: 1,
+        seed: Some(1),
+    };
     for _ in 0..2 {
-        let (code, m) = call(a, "POST", "/api/v1/matches", Some(&q), Some(&token));
-        assert_eq!(code, 202, "{m}");
+        let _: db::Match = post_as(a, "/api/v1/matches", &q, Some(&token), 202);
     }
     let (code, head, resp) = raw_full(
         a,
@@ -1126,14 +1015,11 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
             ("Content-Type", "application/json"),
             ("Authorization", bearer.as_str()),
         ],
-        q.to_string().as_bytes(),
+        &serde_json::to_vec(&q).unwrap(),
     );
-    let e: Value = serde_json::from_slice(&resp).unwrap();
-    assert_eq!(
-        (code, e["error"]["code"].as_str()),
-        (429, Some("rate_limited")),
-        "{e}"
-    );
+    assert_eq!(code, 429, "{}", String::from_utf8_lossy(&resp));
+    let e: ErrorBody = serde_json::from_slice(&resp).unwrap();
+    assert_eq!(e.error.code, "rate_limited");
     let retry: u64 = head
         .lines()
         .find_map(|l| {
@@ -1145,37 +1031,26 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         .parse()
         .unwrap();
     assert!((1..=61).contains(&retry), "{retry}");
-    let (code, _) = call(
-        a,
-        "POST",
-        "/api/v1/tournaments",
-        Some(&json!({"kind": "gauntlet", "agents": [1, 2], "rallies_per_match": 1})),
-        Some(&token),
-    );
-    assert_eq!(code, 429);
-    let (code, m) = call(a, "POST", "/api/v1/matches", Some(&q), Some(TOKEN));
-    assert_eq!(code, 202, "{m}");
-    let (_, all) = call(a, "GET", "/api/v1/matches", None, None);
-    assert_eq!(
-        all["matches"].as_array().unwrap().len(),
-        9,
-        "6 + 2 + 1 (admin), none refused"
-    );
-    let (_, ts) = call(a, "GET", "/api/v1/tournaments", None, None);
-    assert_eq!(ts["tournaments"].as_array().unwrap().len(), 1);
+    let gauntlet = NewTournament {
+        kind: "gauntlet".into(),
+        agents: vec![1.into(), 2.into()],
+        rallies_per_match: 1,
+        rounds: 1,
+        seed: None,
+    };
+    let _: ErrorBody = post_as(a, "/api/v1/tournaments", &gauntlet, Some(&token), 429);
+    let _: db::Match = post_as(a, "/api/v1/matches", &q, Some(TOKEN), 202);
+    let all: MatchList = get_as(a, "/api/v1/matches");
+    assert_eq!(all.matches.len(), 9, "6 + 2 + 1 (admin), none refused");
+    let ts: TournamentList = get_as(a, "/api/v1/tournaments");
+    assert_eq!(ts.tournaments.len(), 1);
     // Paging through the matches with `before`: every one once, newest first.
     let mut seen = vec![];
     let mut path = "/api/v1/matches?limit=4".to_string();
     loop {
-        let (_, page) = call(a, "GET", &path, None, None);
-        seen.extend(
-            page["matches"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|m| m["id"].as_i64().unwrap()),
-        );
-        match page["next_before"].as_i64() {
+        let page: MatchList = get_as(a, &path);
+        seen.extend(page.matches.iter().map(|m| m.id));
+        match page.next_before {
             Some(b) => path = format!("/api/v1/matches?limit=4&before={b}"),
             None => break,
         }
@@ -1183,100 +1058,74 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     assert_eq!(seen, (1..=9).rev().collect::<Vec<i64>>());
 
     // The tournament finishes; its cross-table and standings agree with its matches.
-    let t = poll(
+    let t: TournamentView = poll_as(
         a,
         &format!("/api/v1/tournaments/{tid}"),
         Duration::from_secs(240),
-        |v| v["progress"]["state"] == "finished",
+        |v: &TournamentView| v.summary.progress.state == ProgressState::Finished,
     );
-    assert_eq!(t["progress"]["done"], 6, "{t}");
-    assert_eq!(t["progress"]["fraction"], 1.0);
+    assert_eq!(t.summary.progress.done, 6, "{t:?}");
+    assert_eq!(t.summary.progress.fraction, 1.0);
     let ids = [1i64, 2, 3];
-    let table = &t["cross_table"];
     let mut points = [[0i64; 3]; 3];
-    for m in t["matches"].as_array().unwrap() {
-        let i = ids
-            .iter()
-            .position(|&x| x == m["agent_a"].as_i64().unwrap())
-            .unwrap();
-        let j = ids
-            .iter()
-            .position(|&x| x == m["agent_b"].as_i64().unwrap())
-            .unwrap();
-        points[i][j] += m["points_a"].as_i64().unwrap();
-        points[j][i] += m["points_b"].as_i64().unwrap();
+    for m in &t.matches {
+        let i = ids.iter().position(|&x| x == m.agent_a).unwrap();
+        let j = ids.iter().position(|&x| x == m.agent_b).unwrap();
+        points[i][j] += m.points_a.unwrap();
+        points[j][i] += m.points_b.unwrap();
     }
+    let table = &t.cross_table;
     for i in 0..3 {
-        assert!(table[i][i].is_null());
+        assert!(table[i][i].is_none());
         for j in 0..3 {
             if i != j {
-                assert_eq!(table[i][j]["matches"], 2, "{table}");
-                assert_eq!(table[i][j]["points_for"], points[i][j]);
-                assert_eq!(table[i][j]["points_against"], points[j][i]);
+                let cell = table[i][j].as_ref().unwrap();
+                assert_eq!(cell.matches, 2, "{table:?}");
+                assert_eq!(cell.points_for, points[i][j]);
+                assert_eq!(cell.points_against, points[j][i]);
             }
         }
     }
-    let standings = t["standings"].as_array().unwrap();
-    let total_for: i64 = standings
-        .iter()
-        .map(|s| s["points_for"].as_i64().unwrap())
-        .sum();
+    let total_for: i64 = t.standings.iter().map(|s| s.record.points_for).sum();
     assert_eq!(total_for, points.iter().flatten().sum::<i64>());
-    assert!(standings.iter().all(|s| s["matches"] == 4));
+    assert!(t.standings.iter().all(|s| s.record.matches == 4));
 
     // Each finished match stores both sides' drift; each one between two agents moves both ratings.
-    let first = t["matches"][0]["id"].as_i64().unwrap();
-    let (_, m) = call(a, "GET", &format!("/api/v1/matches/{first}"), None, None);
-    let sides = m["drift_by_side"].as_array().unwrap();
-    assert_eq!(sides.len(), 2, "{m}");
+    let m: MatchDetail = get_as(a, &format!("/api/v1/matches/{}", t.matches[0].id));
+    let sides = &m.drift_by_side;
+    assert_eq!(sides.len(), 2, "{m:?}");
     assert_eq!(
-        (sides[0]["side"].as_str(), sides[0]["agent_id"].as_i64()),
-        (Some("A"), m["agent_a"].as_i64())
+        (sides[0].side.as_str(), sides[0].agent_id),
+        ("A", m.row.agent_a)
     );
-    assert!(sides[1]["drift"]["crossings"].as_u64().is_some());
-    poll(
-        a,
-        "/api/v1/matches?status=queued",
-        Duration::from_secs(120),
-        |v| v["matches"].as_array().unwrap().is_empty(),
-    );
-    poll(
-        a,
-        "/api/v1/matches?status=running",
-        Duration::from_secs(120),
-        |v| v["matches"].as_array().unwrap().is_empty(),
-    );
-    let (_, done) = call(a, "GET", "/api/v1/matches?agent=1&status=done", None, None);
-    let (_, h) = call(a, "GET", "/api/v1/agents/1/ratings", None, None);
-    let history = h["history"].as_array().unwrap();
-    assert_eq!(
-        history.len(),
-        done["matches"].as_array().unwrap().len(),
-        "{h}"
-    );
-    assert!(history
-        .windows(2)
-        .all(|w| w[0]["seq"].as_i64() < w[1]["seq"].as_i64()));
-    assert!(history
-        .windows(2)
-        .all(|w| w[1]["deviation"].as_f64() <= w[0]["deviation"].as_f64()));
+    assert!(sides[1].drift["crossings"].as_u64().is_some());
+    for status in ["queued", "running"] {
+        poll_as(
+            a,
+            &format!("/api/v1/matches?status={status}"),
+            Duration::from_secs(120),
+            |v: &MatchList| v.matches.is_empty(),
+        );
+    }
+    let done: MatchList = get_as(a, "/api/v1/matches?agent=1&status=done");
+    let h: RatingHistory = get_as(a, "/api/v1/agents/1/ratings");
+    let history = &h.history;
+    assert_eq!(history.len(), done.matches.len(), "{h:?}");
+    assert!(history.windows(2).all(|w| w[0].seq < w[1].seq));
+    assert!(history.windows(2).all(|w| w[1].deviation <= w[0].deviation));
     // The agent's own drift, pooled over the same matches.
-    let (_, agent) = call(a, "GET", "/api/v1/agents/1", None, None);
-    assert_eq!(
-        agent["drift"]["matches"].as_u64(),
-        Some(history.len() as u64),
-        "{agent}"
-    );
-    assert!(agent["drift"]["crossings"].as_u64().unwrap() > 0, "{agent}");
+    let agent: AgentDetail = get_as(a, "/api/v1/agents/1");
+    assert_eq!(agent.drift.matches, history.len() as i64, "{agent:?}");
+    assert!(agent.drift.crossings > 0, "{agent:?}");
     // The crossings behind it (SQL over the crossings table) are the same set the match runner's
     // per-side statistics counted.
-    let (_, cx) = call(a, "GET", "/api/v1/agents/1/crossings", None, None);
-    assert_eq!(cx["total"], agent["drift"]["crossings"], "{cx}");
-    let list = cx["crossings"].as_array().unwrap();
-    assert_eq!(list.len() as u64, cx["total"].as_u64().unwrap());
-    let in_box = list.iter().filter(|c| c["in_box"] == true).count() as f64 / list.len() as f64;
-    assert!((in_box - agent["drift"]["in_box_fraction"].as_f64().unwrap()).abs() < 1e-9);
-    assert!(list.iter().any(|c| c["exchange"] == 0));
+    let cx: AgentCrossings = get_as(a, "/api/v1/agents/1/crossings");
+    assert_eq!(cx.total, agent.drift.crossings, "{cx:?}");
+    let list = &cx.crossings;
+    assert_eq!(list.len() as i64, cx.total);
+    let in_box = list.iter().filter(|c| c.in_box).count() as f64 / list.len() as f64;
+    assert!((in_box - agent.drift.in_box_fraction.unwrap()).abs() < 1e-9);
+    assert!(list.iter().any(|c| c.exchange == 0));
     let (code, _) = call(a, "GET", "/api/v1/agents/1/crossings?limit=0", None, None);
     assert_eq!(code, 400);
     let (_, metrics) = call(a, "GET", "/api/v1/metrics", None, None);
@@ -1284,58 +1133,39 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         metrics.as_str().unwrap().contains("rally_tournaments 1"),
         "{metrics}"
     );
-    let (_, board) = call(a, "GET", "/api/v1/leaderboard", None, None);
-    let row = board["rows"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|r| r["agent_id"] == 1)
-        .unwrap()
-        .clone();
-    assert_eq!(row["glicko2"], history.last().unwrap()["rating"], "{row}");
+    let board: Leaderboard = get_as(a, "/api/v1/leaderboard");
+    let row = board.rows.iter().find(|r| r.agent_id == 1).unwrap();
+    assert_eq!(row.glicko2, history.last().unwrap().rating, "{row:?}");
     assert!(
-        row["drift"].as_f64().is_some() || row["in_box_fraction"].as_f64().is_some(),
-        "{row}"
+        row.drift.is_some() || row.in_box_fraction.is_some(),
+        "{row:?}"
     );
 
     // An SPRT plays one match at a time, sides swapped and seed + k, until the test decides.
-    let (code, p) = call(
-        a,
-        "POST",
-        "/api/v1/sprt",
-        Some(
-            &json!({"a": 1, "b": 3, "elo0": 0, "elo1": 100, "rallies_per_match": 4, "max_matches": 6, "seed": 3}),
-        ),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202, "{p}");
-    let pid = p["id"].as_i64().unwrap();
-    let p = poll(
+    let test = NewSprt {
+        elo1: 100.0,
+        rallies_per_match: 4,
+        max_matches: 6,
+        seed: Some(3),
+        ..NewSprt::new(1.into(), 3.into())
+    };
+    let p: SprtView = post_as(a, "/api/v1/sprt", &test, Some(TOKEN), 202);
+    let pid = p.row.id;
+    let p: SprtView = poll_as(
         a,
         &format!("/api/v1/sprt/{pid}"),
         Duration::from_secs(240),
-        |v| v["status"] != "running",
+        |v: &SprtView| v.row.status != SprtStatus::Running,
     );
-    let status = p["status"].as_str().unwrap();
-    let matches = p["matches"].as_array().unwrap();
-    assert_eq!(
-        matches.len() as i64,
-        p["matches_done"].as_i64().unwrap(),
-        "{p}"
-    );
+    let matches = &p.matches;
+    assert_eq!(matches.len() as i64, p.row.matches_done, "{p:?}");
     assert!(matches.len() <= 6);
     let mut shares = vec![];
-    for (k, m) in matches.iter().enumerate() {
-        assert_eq!(m["status"], "done");
-        assert_eq!(m["seed"].as_i64().unwrap(), 3 + k as i64);
-        assert_eq!(
-            m["agent_a"].as_i64().unwrap(),
-            if k % 2 == 0 { 1 } else { 3 }
-        );
-        let (pa, pb) = (
-            m["points_a"].as_i64().unwrap(),
-            m["points_b"].as_i64().unwrap(),
-        );
+    for (k, m) in matches.iter().map(|m| &m.m).enumerate() {
+        assert_eq!(m.status, MatchStatus::Done);
+        assert_eq!(m.seed, 3 + k as i64);
+        assert_eq!(m.agent_a, if k % 2 == 0 { 1 } else { 3 });
+        let (pa, pb) = (m.points_a.unwrap(), m.points_b.unwrap());
         let mine = if k % 2 == 0 { pa } else { pb };
         if pa + pb > 0 {
             shares.push(mine as f64 / (pa + pb) as f64);
@@ -1354,32 +1184,24 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         let var = var.max(mid * (1.0 - mid) / 4.0);
         n * (s1 - s0) * (2.0 * mean - s0 - s1) / (2.0 * var)
     };
-    assert!(
-        (p["llr"].as_f64().unwrap() - llr).abs() < 1e-9,
-        "{p} vs {llr}"
-    );
-    let (lo, hi) = (
-        p["bounds"]["lower"].as_f64().unwrap(),
-        p["bounds"]["upper"].as_f64().unwrap(),
-    );
-    match status {
-        "accepted_h1" => assert!(llr >= hi),
-        "accepted_h0" => assert!(llr <= lo),
-        "inconclusive" => assert!(llr > lo && llr < hi && matches.len() == 6),
-        other => panic!("SPRT ended {other}: {p}"),
+    assert!((p.row.llr - llr).abs() < 1e-9, "{p:?} vs {llr}");
+    let (lo, hi) = (p.bounds.lower, p.bounds.upper);
+    match p.row.status {
+        SprtStatus::AcceptedH1 => assert!(llr >= hi),
+        SprtStatus::AcceptedH0 => assert!(llr <= lo),
+        SprtStatus::Inconclusive => assert!(llr > lo && llr < hi && matches.len() == 6),
+        other => panic!("SPRT ended {other:?}: {p:?}"),
     }
     // An ended SPRT cannot be cancelled; a running one can, and its queued match with it.
     let (code, _) = delete(a, &format!("/api/v1/sprt/{pid}"), Some(TOKEN));
     assert_eq!(code, 409);
-    let (code, p2) = call(
-        a,
-        "POST",
-        "/api/v1/sprt",
-        Some(&json!({"a": 2, "b": 3, "rallies_per_match": 400, "seed": 1})),
-        Some(TOKEN),
-    );
-    assert_eq!(code, 202, "{p2}");
-    let pid2 = p2["id"].as_i64().unwrap();
+    let long = NewSprt {
+        rallies_per_match: 400,
+        seed: Some(1),
+        ..NewSprt::new(2.into(), 3.into())
+    };
+    let p2: SprtView = post_as(a, "/api/v1/sprt", &long, Some(TOKEN), 202);
+    let pid2 = p2.row.id;
     // A submitter cannot cancel what it did not queue; the admin can cancel anything.
     let (code, e) = delete(a, &format!("/api/v1/sprt/{pid2}"), Some(&token));
     assert_eq!(
@@ -1396,18 +1218,14 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         "{e}"
     );
     let (code, c) = delete(a, &format!("/api/v1/sprt/{pid2}"), Some(TOKEN));
-    assert_eq!(
-        (code, c["status"].as_str()),
-        (200, Some("cancelled")),
-        "{c}"
-    );
+    assert_eq!(code, 200, "{c}");
+    let c: SprtView = serde_json::from_value(c).unwrap();
+    assert_eq!(c.row.status, SprtStatus::Cancelled, "{c:?}");
     assert!(
-        c["matches"]
-            .as_array()
-            .unwrap()
+        c.matches
             .iter()
-            .all(|m| m["status"] == "cancelled"),
-        "{c}"
+            .all(|m| m.m.status == MatchStatus::Cancelled),
+        "{c:?}"
     );
 }
 
@@ -1430,8 +1248,8 @@ fn batch_submits_a_plan_follows_it_and_writes_csv() {
     let out = rally(&[bad.to_str().unwrap(), "--server", &url, "--token", TOKEN]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no agent named 'ghost'"));
-    let (_, list) = call(&srv.addr, "GET", "/api/v1/matches", None, None);
-    assert!(list["matches"].as_array().unwrap().is_empty());
+    let list: MatchList = get_as(&srv.addr, "/api/v1/matches");
+    assert!(list.matches.is_empty());
 
     let plan = dir.join("plan.toml");
     std::fs::write(
@@ -1465,11 +1283,11 @@ fn batch_submits_a_plan_follows_it_and_writes_csv() {
     );
     let text = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = text.lines().collect();
-    let (_, sprt) = call(&srv.addr, "GET", "/api/v1/sprt/1", None, None);
-    let sprt_matches = sprt["matches"].as_array().unwrap().len();
+    let sprt: SprtView = get_as(&srv.addr, "/api/v1/sprt/1");
+    let sprt_matches = sprt.matches.len();
     assert!(
-        sprt["status"] != "running" && (2..=3).contains(&sprt_matches),
-        "{sprt}"
+        sprt.row.status != SprtStatus::Running && (2..=3).contains(&sprt_matches),
+        "{sprt:?}"
     );
     assert!(
         stdout.contains("sprt 1: scripted vs scripted-soft"),
@@ -1485,19 +1303,16 @@ fn batch_submits_a_plan_follows_it_and_writes_csv() {
     for line in &lines[1..] {
         let f: Vec<&str> = line.split(',').collect();
         assert_eq!(f[col("status")], "done", "{line}");
-        let (_, m) = call(
+        let m: MatchDetail = get_as(
             &srv.addr,
-            "GET",
             &format!("/api/v1/matches/{}", f[col("match_id")]),
-            None,
-            None,
         );
         assert_eq!(
             f[col("points_a")],
-            m["points_a"].to_string(),
-            "{line} vs {m}"
+            m.row.points_a.unwrap().to_string(),
+            "{line} vs {m:?}"
         );
-        assert_eq!(f[col("seed")], m["seed"].to_string());
+        assert_eq!(f[col("seed")], m.row.seed.to_string());
     }
     // The repeat swapped sides and took the next seed.
     let second: Vec<&str> = lines[2].split(',').collect();

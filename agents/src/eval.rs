@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use sim::arena::Preset;
 use sim::config::ArenaConfig;
 use sim::episode::SingleServe;
@@ -33,7 +33,7 @@ pub struct EpisodeResult {
 }
 
 /// A rate with its Wilson 95% interval.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Rate {
     /// Successes / trials.
     pub value: f64,
@@ -44,7 +44,7 @@ pub struct Rate {
 }
 
 /// A mean with its normal-approximation 95% interval.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Mean {
     /// The mean.
     pub value: f64,
@@ -100,7 +100,7 @@ pub fn mean_interval(xs: &[f64]) -> Mean {
 }
 
 /// An evaluation's summary.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvalReport {
     /// Who was evaluated.
     pub agent: String,

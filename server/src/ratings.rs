@@ -9,7 +9,7 @@
 
 use std::collections::HashMap;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// What the leaderboard knows of an agent (the store's agent row, minus what rating does not need).
 #[derive(Debug, Clone, PartialEq)]
@@ -72,7 +72,7 @@ pub fn bradley_terry_from(wins: &[Vec<f64>], start: Option<&[f64]>) -> Vec<f64> 
 }
 
 /// One leaderboard row.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Row {
     /// 1-based rank by rating.
     pub rank: usize,
@@ -113,7 +113,7 @@ pub struct Row {
 }
 
 /// The leaderboard.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Leaderboard {
     /// Finished matches it is computed from.
     pub matches: usize,

@@ -188,6 +188,91 @@ pub struct AgentList {
     pub agents: Vec<db::Agent>,
 }
 
+/// `GET /agents/{id}`: the row, its drift, its rally lengths and a trained checkpoint's provenance.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AgentDetail {
+    /// The row.
+    #[serde(flatten)]
+    pub row: db::Agent,
+    /// Its drift over its finished matches.
+    pub drift: db::AgentDrift,
+    /// How many of its finished matches' rallies had each length (returns), shortest first.
+    pub rally_lengths: Vec<RallyCount>,
+    /// The `training` record a trained checkpoint carries (provenance, learning curve); none for
+    /// the scripted agents and for checkpoints without one.
+    pub training: Option<Value>,
+}
+
+/// Rallies of one length.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RallyCount {
+    /// Returns in the rally.
+    pub length: i64,
+    /// Rallies that long.
+    pub rallies: i64,
+}
+
+/// `GET /agents/{id}/ratings`: its Glicko-2 history, one point per finished match.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RatingHistory {
+    /// The agent.
+    pub agent_id: i64,
+    /// Its name.
+    pub agent: String,
+    /// `glicko2`.
+    pub system: String,
+    /// Oldest first.
+    pub history: Vec<db::RatingPoint>,
+}
+
+/// `GET /agents/{id}/crossings`: the crossings of the hitting plane it is answerable for.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AgentCrossings {
+    /// The agent.
+    pub agent_id: i64,
+    /// Its name.
+    pub agent: String,
+    /// The serve box, in the receiver's frame.
+    pub serve_box: ServeBox,
+    /// How many there are in all (the list stops at `limit`).
+    pub total: i64,
+    /// Newest match first.
+    pub crossings: Vec<db::AgentCrossing>,
+}
+
+/// The serve box at the hitting plane (DESIGN §7), m.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ServeBox {
+    /// |y| at most.
+    pub half_width: f64,
+    /// Lowest z.
+    pub z_low: f64,
+    /// Highest z.
+    pub z_high: f64,
+}
+
+/// `POST /agents` (201): the stored agent and the qualification it passed.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Submitted {
+    /// The new row.
+    pub agent: db::Agent,
+    /// Its qualification on P2 serves.
+    pub qualification: agents::eval::EvalReport,
+}
+
+/// `POST /tokens` (201): the token, shown this once.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IssuedToken {
+    /// Token id.
+    pub id: i64,
+    /// The submitter's name.
+    pub name: String,
+    /// The bearer token (only its SHA-256 is stored).
+    pub token: String,
+    /// For people.
+    pub note: String,
+}
+
 /// `GET /matches`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MatchList {

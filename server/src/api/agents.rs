@@ -16,21 +16,24 @@ pub(super) async fn get_agent(
     let a = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
-    let mut v = json!(a);
-    v["drift"] = json!(db::agent_drift_summary(&s.pool, id).await?);
-    v["rally_lengths"] = json!(db::agent_rally_lengths(&s.pool, id)
-        .await?
-        .into_iter()
-        .map(|(length, rallies)| json!({"length": length, "rallies": rallies}))
-        .collect::<Vec<_>>());
     // A trained checkpoint's provenance and learning curve, as the checkpoint carries them.
-    v["training"] = match db::agent_spec(&s.pool, id).await? {
-        Some((db::AgentKind::Checkpoint, spec)) => {
-            serde_json::from_str::<Value>(&spec).map_or(Value::Null, |c| c["training"].clone())
-        }
-        _ => Value::Null,
+    let training = match db::agent_spec(&s.pool, id).await? {
+        Some((db::AgentKind::Checkpoint, spec)) => serde_json::from_str::<Value>(&spec)
+            .ok()
+            .and_then(|c| c.get("training").cloned())
+            .filter(|t| !t.is_null()),
+        _ => None,
     };
-    Ok(Json(v))
+    Ok(Json(json!(wire::AgentDetail {
+        row: a,
+        drift: db::agent_drift_summary(&s.pool, id).await?,
+        rally_lengths: db::agent_rally_lengths(&s.pool, id)
+            .await?
+            .into_iter()
+            .map(|(length, rallies)| wire::RallyCount { length, rallies })
+            .collect(),
+        training,
+    })))
 }
 
 /// Agent names: 1–64 characters of `A–Z a–z 0–9 _ . -`, not starting with `.` or `-`.
@@ -158,10 +161,15 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     };
     tracing::info!(id, name = %body.name, hit = qual.1, success = qual.2, "agent submitted");
     s.publish_agent(id);
-    let agent = db::agent(&s.pool, id).await?;
+    let agent = db::agent(&s.pool, id)
+        .await?
+        .ok_or_else(|| anyhow::anyhow!("agent {id} vanished after its insert"))?;
     Ok((
         StatusCode::CREATED,
-        Json(json!({"agent": agent, "qualification": report})),
+        Json(json!(wire::Submitted {
+            agent,
+            qualification: report
+        })),
     )
         .into_response())
 }

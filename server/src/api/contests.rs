@@ -337,9 +337,12 @@ pub(super) async fn get_rating_history(
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
     let history = db::rating_history(&s.pool, id).await?;
-    Ok(Json(
-        json!({"agent_id": id, "agent": a.name, "system": "glicko2", "history": history}),
-    ))
+    Ok(Json(json!(wire::RatingHistory {
+        agent_id: id,
+        agent: a.name,
+        system: "glicko2".into(),
+        history,
+    })))
 }
 
 pub(super) async fn get_agent_crossings(
@@ -354,15 +357,15 @@ pub(super) async fn get_agent_crossings(
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
     let (total, crossings) = db::agent_crossings(&s.pool, id, limit).await?;
-    Ok(Json(json!({
-        "agent_id": id,
-        "agent": a.name,
-        "serve_box": {
-            "half_width": sim::arena::SERVE_BOX_HALF_WIDTH,
-            "z_low": sim::arena::SERVE_BOX_Z.0,
-            "z_high": sim::arena::SERVE_BOX_Z.1,
+    Ok(Json(json!(wire::AgentCrossings {
+        agent_id: id,
+        agent: a.name,
+        serve_box: wire::ServeBox {
+            half_width: sim::arena::SERVE_BOX_HALF_WIDTH,
+            z_low: sim::arena::SERVE_BOX_Z.0,
+            z_high: sim::arena::SERVE_BOX_Z.1,
         },
-        "total": total,
-        "crossings": crossings,
+        total,
+        crossings,
     })))
 }

@@ -30,7 +30,12 @@ pub(super) async fn issue_token(
     };
     Ok((
         StatusCode::CREATED,
-        Json(json!({"id": id, "name": body.name, "token": token, "note": "shown once: only its SHA-256 is stored"})),
+        Json(json!(wire::IssuedToken {
+            id,
+            name: body.name,
+            token,
+            note: "shown once: only its SHA-256 is stored".into(),
+        })),
     )
         .into_response())
 }
