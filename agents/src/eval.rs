@@ -249,6 +249,7 @@ pub fn evaluate(
             ServeKind::P1 => "p1",
             ServeKind::P2 => "p2",
             ServeKind::Rally { .. } => "rally",
+            ServeKind::Stroke { .. } => "stroke",
         }
         .to_string(),
         seed,

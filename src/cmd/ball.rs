@@ -38,8 +38,9 @@ pub struct BallArgs {
     /// Initial ball spin (angular velocity), rad/s.
     #[arg(long, value_name = "WX,WY,WZ", value_parser = parse_vec3, requires = "pos", allow_hyphen_values = true)]
     spin: Option<Vector3<f64>>,
-    /// Generate the ball from a serve: MyoChallenge p0/p1/p2 (to side A) or the paper's rally serve (from B).
-    #[arg(long, value_parser = ["p0", "p1", "p2", "rally"], requires = "seed")]
+    /// Generate the ball from a serve: MyoChallenge p0/p1/p2 (to side A), the paper's rally serve
+    /// (from B) or stroke (a robot's return from B: the rally serve with a stroke's error).
+    #[arg(long, value_parser = ["p0", "p1", "p2", "rally", "stroke"], requires = "seed")]
     serve: Option<String>,
     /// Seed of the serve generator (ChaCha8; identical on every platform).
     #[arg(long, allow_hyphen_values = true)]

@@ -23,9 +23,10 @@ pub struct EvalArgs {
     /// Evaluation seed (each episode derives its own serve and agent seeds from it).
     #[arg(long, default_value = "0")]
     seed: u64,
-    /// Serve distribution: MyoChallenge p1 or p2, or the paper's heuristic rally serve (from the
-    /// other robot's hitting plane, as a rally starts).
-    #[arg(long, default_value = "p2", value_parser = ["p1", "p2", "rally"])]
+    /// Serve distribution: MyoChallenge p1 or p2, the paper's heuristic rally serve (from the
+    /// other robot's hitting plane, as a rally starts), or stroke (a robot's return as a rally brings
+    /// it after the serve: the rally serve with a stroke's error, about half outside the serve box).
+    #[arg(long, default_value = "p2", value_parser = ["p1", "p2", "rally", "stroke"])]
     serve: String,
     /// Arena preset.
     #[arg(long, default_value = "myochallenge", value_parser = parse_preset)]

@@ -33,8 +33,10 @@ pub struct TrainArgs {
     /// default: the configuration's `env` (config/train.toml: single).
     #[arg(long, value_parser = parse_env)]
     env: Option<TrainEnv>,
-    /// Training serves of the single-serve environment: p2 (MyoChallenge P2) or rally (the paper's
-    /// heuristic rally serve, the official code's training serve); default: the configuration's.
+    /// Training serves of the single-serve environment: p2 (MyoChallenge P2), rally (the paper's
+    /// heuristic rally serve, the official code's training serve) or stroke (a robot's return: the
+    /// rally serve with a stroke's error, half of them outside the serve box; ours); default: the
+    /// configuration's.
     #[arg(long, value_parser = parse_serve)]
     serve: Option<TrainServe>,
     /// Start from the weights and observation statistics of the run in this directory (a warm start,
@@ -72,7 +74,10 @@ fn parse_serve(s: &str) -> Result<TrainServe, String> {
     match s {
         "p2" => Ok(TrainServe::P2),
         "rally" => Ok(TrainServe::Rally),
-        _ => Err(format!("'{s}': the training serves are p2 and rally")),
+        "stroke" => Ok(TrainServe::Stroke),
+        _ => Err(format!(
+            "'{s}': the training serves are p2, rally and stroke"
+        )),
     }
 }
 

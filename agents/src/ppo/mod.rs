@@ -220,6 +220,9 @@ pub enum TrainServe {
     P2,
     /// The paper's rally serve from B's hitting plane (the official code's training serve).
     Rally,
+    /// A robot's return from B's hitting plane: the rally serve with a stroke's error, about half
+    /// of them outside the serve box (`sim::serve::ServeKind::Stroke`; ours).
+    Stroke,
 }
 
 impl TrainServe {
@@ -228,6 +231,9 @@ impl TrainServe {
         match self {
             TrainServe::P2 => sim::serve::ServeKind::P2,
             TrainServe::Rally => sim::serve::ServeKind::Rally {
+                server: sim::arena::Side::B,
+            },
+            TrainServe::Stroke => sim::serve::ServeKind::Stroke {
                 server: sim::arena::Side::B,
             },
         }
