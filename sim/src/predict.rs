@@ -9,7 +9,7 @@
 use nalgebra::Vector3;
 
 use crate::arena::{self, Side, SurfaceLaw};
-use crate::rng::Rng;
+use crate::rng::{first_accepted, Rng};
 
 type V3 = Vector3<f64>;
 
@@ -266,8 +266,9 @@ pub fn sample_return(
     model: &BounceModel,
 ) -> SampledReturn {
     let plane = hitter.other().strike_plane_x();
-    let mut last = None;
-    for attempt in 1..=RETURN_MAX_ATTEMPTS {
+    let mut attempts = 0;
+    first_accepted(RETURN_MAX_ATTEMPTS, || {
+        attempts += 1;
         let v_out = draw_return(rng, strike, hitter, model);
         let crossing = plane_crossing(strike, &v_out, plane, model);
         let accepted = return_is_in_box(hitter, &crossing);
@@ -275,14 +276,11 @@ pub fn sample_return(
             v_out,
             crossing,
             accepted,
-            attempts: attempt,
+            attempts,
         };
-        if accepted {
-            return r;
-        }
-        last = Some(r);
-    }
-    last.expect("at least one attempt")
+        (r, accepted)
+    })
+    .0
 }
 
 #[cfg(test)]

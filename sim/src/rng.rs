@@ -39,6 +39,20 @@ impl Rng {
     }
 }
 
+/// Rejection sampling with a cap: calls `draw` (which returns a candidate and whether it is accepted)
+/// up to `n` times and returns the first accepted candidate, or the last one drawn (with `false`)
+/// when none was. `n` ≥ 1.
+pub fn first_accepted<T>(n: usize, mut draw: impl FnMut() -> (T, bool)) -> (T, bool) {
+    let mut last = draw();
+    for _ in 1..n {
+        if last.1 {
+            break;
+        }
+        last = draw();
+    }
+    last
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -61,5 +75,21 @@ mod tests {
             let x = r.uniform(-2.0, 3.0);
             assert!((-2.0..3.0).contains(&x));
         }
+    }
+
+    #[test]
+    fn first_accepted_stops_at_the_first_and_else_returns_the_last() {
+        let mut calls = 0;
+        let got = first_accepted(10, || {
+            calls += 1;
+            (calls, calls == 3)
+        });
+        assert_eq!((got, calls), ((3, true), 3));
+        let mut calls = 0;
+        let got = first_accepted(4, || {
+            calls += 1;
+            (calls, false)
+        });
+        assert_eq!((got, calls), ((4, false), 4));
     }
 }

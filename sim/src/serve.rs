@@ -7,7 +7,7 @@ use nalgebra::Vector3;
 use crate::arena::{self, Side};
 use crate::ball::BallState;
 use crate::predict::{self, BounceModel, PlaneCrossing};
-use crate::rng::Rng;
+use crate::rng::{first_accepted, Rng};
 
 type V3 = Vector3<f64>;
 
@@ -137,13 +137,12 @@ pub fn generate(kind: ServeKind, rng: &mut Rng, model: &BounceModel) -> Serve {
 /// [`STROKE_MAX_DRAWS`] illegal balls.
 fn stroke_serve(server: Side, rng: &mut Rng, model: &BounceModel) -> Serve {
     let receiver = server.other();
-    let mut last = None;
-    for _ in 0..RALLY_SERVE_MAX_POINTS {
+    let start = |rng: &mut Rng| {
         let y_r = rng.uniform(-arena::SERVE_BOX_HALF_WIDTH, arena::SERVE_BOX_HALF_WIDTH);
         let z = rng.uniform(STROKE_START_Z.0, STROKE_START_Z.1);
         let pos = V3::new(server.strike_plane_x(), server.world_y(y_r), z);
         let aimed = predict::sample_return(rng, &pos, server, model);
-        for _ in 0..STROKE_MAX_DRAWS {
+        first_accepted(STROKE_MAX_DRAWS, || {
             let error = V3::new(rng.normal(), rng.normal(), rng.normal()) * STROKE_ERROR_SIGMA;
             let vel = aimed.v_out + error;
             let crossing = predict::plane_crossing(&pos, &vel, receiver.strike_plane_x(), model);
@@ -159,21 +158,17 @@ fn stroke_serve(server: Side, rng: &mut Rng, model: &BounceModel) -> Serve {
                 receiver,
                 predicted_crossing: crossing,
             };
-            if legal {
-                return serve;
-            }
-            last = Some(serve);
-        }
-    }
-    last.expect("at least one draw")
+            (serve, legal)
+        })
+    };
+    first_accepted(RALLY_SERVE_MAX_POINTS, || start(rng)).0
 }
 
 /// The paper's heuristic server (§IV-C): a start point uniform in the serve box on the server's
 /// hitting plane and an outgoing velocity from the return sampler, redrawn until the ball bounces on
 /// the receiver's half and crosses the receiver's plane inside the serve box.
 fn rally_serve(server: Side, rng: &mut Rng, model: &BounceModel) -> Serve {
-    let mut last = None;
-    for _ in 0..RALLY_SERVE_MAX_POINTS {
+    first_accepted(RALLY_SERVE_MAX_POINTS, || {
         let y_r = rng.uniform(-arena::SERVE_BOX_HALF_WIDTH, arena::SERVE_BOX_HALF_WIDTH);
         let z = rng.uniform(arena::SERVE_BOX_Z.0, arena::SERVE_BOX_Z.1);
         let pos = V3::new(server.strike_plane_x(), server.world_y(y_r), z);
@@ -184,12 +179,9 @@ fn rally_serve(server: Side, rng: &mut Rng, model: &BounceModel) -> Serve {
             receiver: server.other(),
             predicted_crossing: r.crossing,
         };
-        if r.accepted {
-            return serve;
-        }
-        last = Some(serve);
-    }
-    last.expect("at least one start point")
+        (serve, r.accepted)
+    })
+    .0
 }
 
 #[cfg(test)]
@@ -197,8 +189,8 @@ mod tests {
     use super::*;
     use crate::predict::MYOCHALLENGE_BOUNCE;
 
-    /// P1, P2 and rally serve (by A) for seed 0: position then velocity, as f64 bits.
-    const PINNED: [[u64; 6]; 3] = [
+    /// P1, P2, rally serve (by A) and stroke serve (by B) for seed 0: position then velocity, as f64 bits.
+    const PINNED: [[u64; 6]; 4] = [
         [
             13831520685972801208,
             13825631191048445258,
@@ -222,6 +214,14 @@ mod tests {
             13842087512940187656,
             4594764360310771632,
             4604839003596996420,
+        ],
+        [
+            13834157335356689613,
+            13821595995825143863,
+            4607765873792844218,
+            4621570364070648018,
+            4601929591068587814,
+            4599057217928218583,
         ],
     ];
 
@@ -329,7 +329,12 @@ mod tests {
             &mut Rng::seeded(0),
             &MYOCHALLENGE_BOUNCE,
         );
-        let got = [bits(&p1), bits(&p2), bits(&rally)];
+        let stroke = generate(
+            ServeKind::Stroke { server: Side::B },
+            &mut Rng::seeded(0),
+            &MYOCHALLENGE_BOUNCE,
+        );
+        let got = [bits(&p1), bits(&p2), bits(&rally), bits(&stroke)];
         assert_eq!(got, PINNED, "seeded serves changed: {got:?}");
     }
 
