@@ -182,5 +182,22 @@ fn bad_arguments_exit_2_and_name_what_is_wrong() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("epochz"));
     assert!(!base.join("run/checkpoint.json").exists());
+    // A ball bank that is not there is named, and nothing is written.
+    std::fs::write(&bad, "[bank]\nfile = \"no/such/bank.json\"\n").unwrap();
+    let out = rally(&[
+        "train",
+        "--method",
+        "kmac",
+        "--steps",
+        "10",
+        "--config",
+        bad.to_str().unwrap(),
+        "--out",
+        base.join("run").to_str().unwrap(),
+    ]);
+    assert_ne!(out.status.code(), Some(0));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bank.file no/such/bank.json"), "{err}");
+    assert!(!base.join("run/checkpoint.json").exists());
     let _ = std::fs::remove_dir_all(&base);
 }

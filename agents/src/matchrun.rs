@@ -7,8 +7,9 @@ use std::sync::Arc;
 
 use serde::Serialize;
 use sim::arena::{Preset, Side};
+use sim::ball::BallState;
 use sim::config::ArenaConfig;
-use sim::episode::{Crossing, Rally};
+use sim::episode::{Crossing, Rally, StepReport};
 use sim::model::Model;
 use sim::rng::Rng;
 
@@ -321,9 +322,14 @@ pub fn play_match_with(
     let mut replay: Replay = Vec::new();
     let mut points = [0u32; 2];
     for k in 0..spec.rallies {
-        let (record, frames, loser) = play_rally(&mut rally, &mut players, spec, k, &mut |frame| {
-            on_event(MatchEvent::Frame { rally: k, frame })
-        });
+        let (record, frames, loser) = play_rally(
+            &mut rally,
+            &mut players,
+            spec,
+            k,
+            &mut |frame| on_event(MatchEvent::Frame { rally: k, frame }),
+            &mut |_, _| {},
+        );
         if let Some(loser) = loser {
             points[match loser {
                 Side::A => 1,
@@ -402,8 +408,107 @@ pub fn play_rallies(
     Ok(crate::seeds::par_indexed(
         spec.rallies as usize,
         || build().expect("checked above"),
-        |(players, rally), k| play_rally(rally, players, &spec, k as u32, &mut |_| {}).0,
+        |(players, rally), k| {
+            play_rally(rally, players, &spec, k as u32, &mut |_| {}, &mut |_, _| {}).0
+        },
     ))
+}
+
+/// Every legal return of the match `spec` describes between `a` and `b`, as its receiver met it: the
+/// ball [`crate::env::TASK_DELAY_STEPS`] control steps after the stroke's first paddle contact (where
+/// training judges a stroke), turned into the frame of a ball struck by B towards A (a half turn
+/// about the vertical for A's returns), in rally order. Only returns that landed on the other half
+/// count. Played like [`play_rallies`]; a ball bank for training on the balls a rally brings
+/// (`[bank]` in a training configuration, `rally match --returns`).
+pub fn record_returns(
+    spec: &MatchSpec,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+) -> Result<Vec<BallState>, String> {
+    let build = || -> Result<([Box<dyn Player>; 2], Rally), String> {
+        Ok((
+            [
+                a.build(&spec.model, &spec.preset, 0)?,
+                b.build(&spec.model, &spec.preset, 0)?,
+            ],
+            Rally::new(spec.model.clone(), &spec.config, spec.preset)?,
+        ))
+    };
+    build()?;
+    let spec = MatchSpec {
+        replay: false,
+        ..spec.clone()
+    };
+    let per_rally = crate::seeds::par_indexed(
+        spec.rallies as usize,
+        || build().expect("checked above"),
+        |(players, rally), k| {
+            let mut tracker = ReturnTracker::default();
+            play_rally(
+                rally,
+                players,
+                &spec,
+                k as u32,
+                &mut |_| {},
+                &mut |r, report| tracker.step(r, report),
+            );
+            tracker.returns
+        },
+    );
+    Ok(per_rally.into_iter().flatten().collect())
+}
+
+/// Follows one rally for [`record_returns`].
+#[derive(Default)]
+struct ReturnTracker {
+    /// The side whose stroke is in flight and the control steps since its first contact.
+    stroke: Option<(Side, usize)>,
+    /// That stroke's ball, once taken, waiting for the referee's verdict.
+    pending: Option<(Side, BallState)>,
+    returns: Vec<BallState>,
+}
+
+impl ReturnTracker {
+    fn step(&mut self, rally: &Rally, report: &StepReport) {
+        for e in &report.events {
+            if let sim::ContactKind::Paddle { owner } = e.kind {
+                if self.stroke.is_none_or(|(s, _)| s != owner) {
+                    self.stroke = Some((owner, 0));
+                    self.pending = None;
+                }
+            }
+        }
+        if let Some((side, n)) = self.stroke.as_mut() {
+            *n += 1;
+            if *n == crate::env::TASK_DELAY_STEPS {
+                self.pending = Some((*side, rally.arena.world.ball));
+            }
+        }
+        for call in &report.calls {
+            if let sim::rules::Call::LegalReturn { hitter, .. } = call {
+                if let Some((side, ball)) = self.pending.take() {
+                    if side == *hitter {
+                        self.returns.push(struck_by_b(side, ball));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `ball`, struck by `hitter`, in the frame where B struck it (a half turn about z for A).
+fn struck_by_b(hitter: Side, ball: BallState) -> BallState {
+    match hitter {
+        Side::B => ball,
+        Side::A => {
+            let turn = |v: nalgebra::Vector3<f64>| nalgebra::Vector3::new(-v.x, -v.y, v.z);
+            BallState {
+                pos: turn(ball.pos),
+                vel: turn(ball.vel),
+                spin: turn(ball.spin),
+            }
+        }
+    }
 }
 
 /// Plays rally `k` of a match on `rally` (reset first: every rally starts from the ready pose with its
@@ -416,6 +521,7 @@ fn play_rally(
     spec: &MatchSpec,
     k: u32,
     on_frame: &mut dyn FnMut(&Frame),
+    on_step: &mut dyn FnMut(&Rally, &StepReport),
 ) -> (RallyRecord, Vec<Frame>, Option<Side>) {
     let mut ctrl = vec![0.0; spec.model.actuators.len()];
     let server = if k.is_multiple_of(2) {
@@ -460,7 +566,9 @@ fn play_rally(
             break;
         }
         step += 1;
-        if rally.step().done {
+        let report = rally.step();
+        on_step(rally, &report);
+        if report.done {
             break;
         }
     }
@@ -504,7 +612,14 @@ pub fn replay_rally(
         replay: true,
         ..spec.clone()
     };
-    let (record, frames, _) = play_rally(&mut rally, &mut players, &spec, k, &mut |_| {});
+    let (record, frames, _) = play_rally(
+        &mut rally,
+        &mut players,
+        &spec,
+        k,
+        &mut |_| {},
+        &mut |_, _| {},
+    );
     Ok((record, frames))
 }
 

@@ -222,3 +222,34 @@ fn rallies_played_in_parallel_are_the_match_rallies() {
         );
     }
 }
+
+#[test]
+fn recorded_returns_are_the_legal_returns_struck_towards_a() {
+    let s = spec(24, 11, false);
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/checkpoints/kmac-rally.json"
+    ))
+    .unwrap();
+    let ck = agents::checkpoint::Checkpoint::from_json(&text, &s.model).unwrap();
+    let p = PlayerSpec::Checkpoint(Arc::new(ck));
+    let lengths: u32 = agents::matchrun::play_rallies(&s, &p, &p)
+        .unwrap()
+        .iter()
+        .map(|r| r.length)
+        .sum();
+    let balls = agents::matchrun::record_returns(&s, &p, &p).unwrap();
+    assert!(lengths >= 10, "too few returns to test: {lengths}");
+    assert_eq!(balls.len() as u32, lengths, "one ball per legal return");
+    for b in &balls {
+        // Struck by B: on B's half or just over the net, flying towards A, above the table.
+        assert!(b.pos.x < 0.5 && b.vel.x > 0.0 && b.pos.z > 0.76, "{b:?}");
+    }
+    let again = agents::matchrun::record_returns(&s, &p, &p).unwrap();
+    assert_eq!(balls, again, "the same match records the same balls");
+    let bank = agents::env::BallBank::parse(
+        &agents::env::BallBank::to_json(&balls, serde_json::Value::Null).to_string(),
+    )
+    .unwrap();
+    assert_eq!(bank, balls, "the bank file keeps every bit");
+}

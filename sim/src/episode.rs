@@ -122,11 +122,16 @@ impl SingleServe {
 
     /// A new episode: the robot at `qpos` (default: "ready"), a serve of `kind` drawn from `rng`.
     pub fn reset(&mut self, kind: ServeKind, rng: &mut Rng, qpos: Option<&[f64]>) {
+        let model = BounceModel::for_table(&self.world.preset.table);
+        self.reset_with(serve::generate(kind, rng, &model), qpos);
+    }
+
+    /// A new episode with a given ball: the robot at `qpos` (default: "ready"), `serve` in play.
+    pub fn reset_with(&mut self, serve: Serve, qpos: Option<&[f64]>) {
         let ready = ready_pose(self.robot.held_model());
         self.robot.reset(qpos.or(ready.as_deref()));
-        let preset = self.world.preset;
-        self.serve = serve::generate(kind, rng, &BounceModel::for_table(&preset.table));
-        self.world = BallWorld::new(preset, self.serve.ball);
+        self.serve = serve;
+        self.world = BallWorld::new(self.world.preset, self.serve.ball);
         self.referee = Referee::new(self.serve.server);
         self.steps = 0;
         self.hit = false;

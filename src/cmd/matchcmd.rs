@@ -39,6 +39,10 @@ pub struct MatchArgs {
     /// Print the match record as one JSON object instead of a table.
     #[arg(long)]
     json: bool,
+    /// Also write every legal return of the match, as its receiver met it, to this JSON file: a ball
+    /// bank for training on the balls a rally brings (`[bank] file` in a training configuration).
+    #[arg(long, value_name = "FILE")]
+    returns: Option<PathBuf>,
 }
 
 fn print_table(r: &MatchRecord) {
@@ -112,6 +116,28 @@ pub fn run(args: &MatchArgs) -> Result<(), CliError> {
             std::fs::File::create(path).with_context(|| format!("--replay {}", path.display()))?;
         serde_json::to_writer(&mut f, &doc).context("writing the replay")?;
         f.flush().context("writing the replay")?;
+    }
+    if let Some(path) = &args.returns {
+        let balls = agents::matchrun::record_returns(&spec, &a, &b)
+            .map_err(|e| CliError::Failed(anyhow::anyhow!(e)))?;
+        let doc = agents::env::BallBank::to_json(
+            &balls,
+            json!({
+                "command": std::env::args().collect::<Vec<_>>().join(" "),
+                "a": record.a, "b": record.b, "rallies": args.rallies, "seed": args.seed,
+                "preset": record.preset, "sim_version": sim::SIM_VERSION,
+            }),
+        );
+        std::fs::write(
+            path,
+            serde_json::to_string(&doc).map_err(anyhow::Error::from)?,
+        )
+        .with_context(|| format!("--returns {}", path.display()))?;
+        eprintln!(
+            "{} legal returns written to {}",
+            balls.len(),
+            path.display()
+        );
     }
     if args.json {
         println!(

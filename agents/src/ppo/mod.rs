@@ -315,6 +315,10 @@ pub struct ValidationConfig {
     /// Seed of the validation's serves; every validation of a run plays the same ones, so its
     /// checkpoints are compared on equal terms. Report figures on other seeds.
     pub seed: u64,
+    /// What validation plays: "rally" (self-play rallies, score the mean rally length) or "single"
+    /// (single serves of the training distribution, score the success rate); default: the
+    /// training environment's.
+    pub env: Option<TrainEnv>,
 }
 
 impl Default for ValidationConfig {
@@ -323,6 +327,7 @@ impl Default for ValidationConfig {
             every: 0,
             episodes: 200,
             seed: 4242,
+            env: None,
         }
     }
 }
@@ -343,6 +348,28 @@ pub struct TrainConfig {
     pub env: TrainEnv,
     /// Held-out validation and the best checkpoint.
     pub validation: ValidationConfig,
+    /// Balls recorded from rallies, served in a share of the single-serve environment's episodes.
+    pub bank: BankConfig,
+}
+
+/// A ball bank for the single-serve environment (ours; see [`crate::env::BallBank`]): the file
+/// `rally match --returns` wrote and the share of episodes it serves; the rest get `serve`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BankConfig {
+    /// The bank file (relative to the working directory); none: no bank (the default).
+    pub file: Option<String>,
+    /// Share of episodes served from it, in [0, 1].
+    pub fraction: f64,
+}
+
+impl Default for BankConfig {
+    fn default() -> Self {
+        BankConfig {
+            file: None,
+            fraction: 0.5,
+        }
+    }
 }
 
 impl TrainConfig {
@@ -369,7 +396,7 @@ impl TrainConfig {
     /// Refuses settings PPO cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         let p = &self.ppo;
-        let checks: [(&str, bool); 13] = [
+        let checks: [(&str, bool); 14] = [
             ("ppo.envs", p.envs >= 1),
             ("ppo.steps_per_env", p.steps_per_env >= 1),
             ("ppo.epochs", p.epochs >= 1),
@@ -401,6 +428,7 @@ impl TrainConfig {
                 "validation.episodes",
                 self.validation.every == 0 || self.validation.episodes >= 1,
             ),
+            ("bank.fraction", (0.0..=1.0).contains(&self.bank.fraction)),
             (
                 "controller.grip_floor",
                 (0.0..=1.0).contains(&self.controller.grip_floor),

@@ -335,6 +335,16 @@ fn make_env(
             )?;
             env.end = EpisodeEnd::Training;
             env.grip_floor = grip_floor;
+            if let Some(file) = &config.bank.file {
+                let text =
+                    std::fs::read_to_string(file).map_err(|e| format!("bank.file {file}: {e}"))?;
+                let balls = crate::env::BallBank::parse(&text)
+                    .map_err(|e| format!("bank.file {file}: {e}"))?;
+                env.bank = Some(crate::env::BallBank {
+                    balls: balls.into(),
+                    fraction: config.bank.fraction,
+                });
+            }
             let (o, a) = (env.obs_dim(), env.action_dim());
             (TrainingEnv::Single(Box::new(env)), o, a)
         }
@@ -766,7 +776,7 @@ impl Trainer {
             "",
         )?));
         let (config, preset) = (ArenaConfig::default(), sim::arena::MYOCHALLENGE);
-        let (score, longest) = match self.config.env {
+        let (score, longest) = match v.env.unwrap_or(self.config.env) {
             TrainEnv::Rally => {
                 let spec = crate::matchrun::MatchSpec {
                     model: self.model.clone(),
