@@ -167,34 +167,27 @@ fn bad_arguments_exit_2_and_name_what_is_wrong() {
     assert_eq!(out.status.code(), Some(2));
     std::fs::create_dir_all(&base).unwrap();
     let bad = base.join("bad.toml");
-    std::fs::write(&bad, "[ppo]\nepochz = 3\n").unwrap();
-    let out = rally(&[
-        "train",
-        "--method",
-        "kmac",
-        "--steps",
-        "10",
-        "--config",
-        bad.to_str().unwrap(),
-        "--out",
-        base.join("run").to_str().unwrap(),
-    ]);
+    let run = base.join("run");
+    let with_config = |text: &str| {
+        std::fs::write(&bad, text).unwrap();
+        rally(&[
+            "train",
+            "--method",
+            "kmac",
+            "--steps",
+            "10",
+            "--config",
+            bad.to_str().unwrap(),
+            "--out",
+            run.to_str().unwrap(),
+        ])
+    };
+    let out = with_config("[ppo]\nepochz = 3\n");
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("epochz"));
     assert!(!base.join("run/checkpoint.json").exists());
     // A ball bank that is not there is named, and nothing is written.
-    std::fs::write(&bad, "[bank]\nfile = \"no/such/bank.json\"\n").unwrap();
-    let out = rally(&[
-        "train",
-        "--method",
-        "kmac",
-        "--steps",
-        "10",
-        "--config",
-        bad.to_str().unwrap(),
-        "--out",
-        base.join("run").to_str().unwrap(),
-    ]);
+    let out = with_config("[bank]\nfile = \"no/such/bank.json\"\n");
     assert_ne!(out.status.code(), Some(0));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("bank.file no/such/bank.json"), "{err}");

@@ -390,6 +390,40 @@ pub fn play_rallies(
     a: &PlayerSpec,
     b: &PlayerSpec,
 ) -> Result<Vec<RallyRecord>, String> {
+    par_rallies(spec, a, b, |rally, players, spec, k| {
+        play_rally(rally, players, spec, k, &mut |_| {}, &mut |_, _| {}).0
+    })
+}
+
+/// Every legal return of the match `spec` describes between `a` and `b`, as its receiver met it: the
+/// ball [`crate::env::TASK_DELAY_STEPS`] control steps after the stroke's first paddle contact (where
+/// training judges a stroke), turned into the frame of a ball struck by B towards A (a half turn
+/// about the vertical for A's returns), in rally order. Only returns that landed on the other half
+/// count. Played like [`play_rallies`]; a ball bank for training on the balls a rally brings
+/// (`[bank]` in a training configuration, `rally match --returns`).
+pub fn record_returns(
+    spec: &MatchSpec,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+) -> Result<Vec<BallState>, String> {
+    let per_rally = par_rallies(spec, a, b, |rally, players, spec, k| {
+        let mut tracker = ReturnTracker::default();
+        play_rally(rally, players, spec, k, &mut |_| {}, &mut |r, report| {
+            tracker.step(r, report)
+        });
+        tracker.returns
+    })?;
+    Ok(per_rally.into_iter().flatten().collect())
+}
+
+/// `play(rally, players, spec, k)` for every rally k of the match, without replay frames, in
+/// parallel (one arena and pair of players per rayon worker), results in rally order.
+fn par_rallies<T: Send>(
+    spec: &MatchSpec,
+    a: &PlayerSpec,
+    b: &PlayerSpec,
+    play: impl Fn(&mut Rally, &mut [Box<dyn Player>; 2], &MatchSpec, u32) -> T + Sync,
+) -> Result<Vec<T>, String> {
     let build = || -> Result<([Box<dyn Player>; 2], Rally), String> {
         Ok((
             [
@@ -408,54 +442,8 @@ pub fn play_rallies(
     Ok(crate::seeds::par_indexed(
         spec.rallies as usize,
         || build().expect("checked above"),
-        |(players, rally), k| {
-            play_rally(rally, players, &spec, k as u32, &mut |_| {}, &mut |_, _| {}).0
-        },
+        |(players, rally), k| play(rally, players, &spec, k as u32),
     ))
-}
-
-/// Every legal return of the match `spec` describes between `a` and `b`, as its receiver met it: the
-/// ball [`crate::env::TASK_DELAY_STEPS`] control steps after the stroke's first paddle contact (where
-/// training judges a stroke), turned into the frame of a ball struck by B towards A (a half turn
-/// about the vertical for A's returns), in rally order. Only returns that landed on the other half
-/// count. Played like [`play_rallies`]; a ball bank for training on the balls a rally brings
-/// (`[bank]` in a training configuration, `rally match --returns`).
-pub fn record_returns(
-    spec: &MatchSpec,
-    a: &PlayerSpec,
-    b: &PlayerSpec,
-) -> Result<Vec<BallState>, String> {
-    let build = || -> Result<([Box<dyn Player>; 2], Rally), String> {
-        Ok((
-            [
-                a.build(&spec.model, &spec.preset, 0)?,
-                b.build(&spec.model, &spec.preset, 0)?,
-            ],
-            Rally::new(spec.model.clone(), &spec.config, spec.preset)?,
-        ))
-    };
-    build()?;
-    let spec = MatchSpec {
-        replay: false,
-        ..spec.clone()
-    };
-    let per_rally = crate::seeds::par_indexed(
-        spec.rallies as usize,
-        || build().expect("checked above"),
-        |(players, rally), k| {
-            let mut tracker = ReturnTracker::default();
-            play_rally(
-                rally,
-                players,
-                &spec,
-                k as u32,
-                &mut |_| {},
-                &mut |r, report| tracker.step(r, report),
-            );
-            tracker.returns
-        },
-    );
-    Ok(per_rally.into_iter().flatten().collect())
 }
 
 /// Follows one rally for [`record_returns`].

@@ -221,3 +221,52 @@ fn the_rally_batch_configuration_is_the_finetune_one_but_for_its_batch_and_valid
     c.validation.every = 0;
     assert_eq!(c, read("train-rally-finetune.toml"));
 }
+
+#[test]
+fn a_refreshed_bank_is_kept_in_the_resumable_state_and_served() {
+    // Balls struck by B (rally serves stand in for recorded returns), served in every episode.
+    let balls: Vec<sim::ball::BallState> = (0..5)
+        .map(|i| {
+            sim::serve::generate(
+                sim::serve::ServeKind::Rally {
+                    server: sim::arena::Side::B,
+                },
+                &mut sim::rng::Rng::seeded(i),
+                &sim::predict::MYOCHALLENGE_BOUNCE,
+            )
+            .ball
+        })
+        .collect();
+    let mut cfg = small(4, 8, 2);
+    cfg.bank.fraction = 1.0;
+    let m = model();
+    let mut straight = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 12).unwrap();
+    straight.set_bank(balls.clone().into());
+    let mut plain = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 12).unwrap();
+    for _ in 0..4 {
+        straight.iterate().unwrap();
+        plain.iterate().unwrap();
+    }
+    assert_ne!(
+        weights(&straight),
+        weights(&plain),
+        "the bank's balls were served"
+    );
+    let dir = std::env::temp_dir().join(format!("rally-ppo-bank-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = RunDir::open(&dir).unwrap();
+    let mut first = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 12).unwrap();
+    first.set_bank(balls.clone().into());
+    for _ in 0..2 {
+        first.iterate().unwrap();
+    }
+    run.save_state(&first).unwrap();
+    drop(first);
+    let mut resumed = run.load(m).unwrap();
+    assert_eq!(resumed.bank.as_deref(), Some(&balls[..]));
+    for _ in 0..2 {
+        resumed.iterate().unwrap();
+    }
+    assert_eq!(weights(&resumed), weights(&straight));
+    let _ = std::fs::remove_dir_all(&dir);
+}

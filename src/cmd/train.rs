@@ -24,7 +24,7 @@ use super::CliError;
     Writes OUT/checkpoint.json (the agents' checkpoint format: rally eval OUT/checkpoint.json),\n\
     OUT/curve.csv, OUT/curve.png and OUT/resume/ (what --resume reads). With [validation] every = K\n\
     in the configuration, every K iterations the policy plays held-out episodes (self-play rallies in\n\
-    the rally environment): OUT/validation.csv, and OUT/best.json is the best so far.")]
+    the rally environment): OUT/validation.csv, and OUT/best.json is the best so far (OUT/best/ its resumable state:\n--init OUT/best starts a run from it).")]
 pub struct TrainArgs {
     /// The method: kmac (Diff-Muscle), muscle (Muscle-PPO), muscle-pd or dynsyn.
     #[arg(long, value_parser = parse_method)]
@@ -191,7 +191,7 @@ fn validate(
     let point = t.validate().map_err(|e| anyhow!(e))?;
     let best_before = t.progress.best_validation().map(|b| b.score);
     t.progress.validations.push(point);
-    let words = validation_words(t.config.env, &point);
+    let words = validation_words(t.config.validation_env(), &point);
     let is_best = best_before.is_none_or(|b| point.score > b);
     if is_best {
         let mut ck = t
@@ -205,6 +205,10 @@ fn validate(
         }
         let json = serde_json::to_vec(&ck).map_err(anyhow::Error::from)?;
         write_atomic(&dir.best_path(), &json).map_err(|e| anyhow!(e))?;
+        // Its whole state too, so that a warm start can begin from the best (`--init OUT/best`).
+        RunDir::open(&dir.dir.join("best"))
+            .and_then(|b| b.save_state(t))
+            .map_err(|e| anyhow!(e))?;
     }
     dir.write_validations(&t.progress.validations)
         .map_err(|e| anyhow!(e))?;
@@ -326,6 +330,19 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         if v_every > 0 && row.iteration.is_multiple_of(v_every) {
             validate(&dir, &mut trainer, &name, &command, &commit, &bar)?;
         }
+        let r_every = trainer.config.bank.refresh_every as u64;
+        if r_every > 0 && row.iteration.is_multiple_of(r_every) {
+            let n = trainer.refresh_bank().map_err(|e| anyhow!(e))?;
+            let line = format!(
+                "bank at iteration {}: {n} returns of the policy in {} self-play rallies",
+                row.iteration, trainer.config.bank.refresh_rallies
+            );
+            if bar.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                bar.println(line);
+            }
+        }
         let boundary = row.iteration.is_multiple_of(every);
         if boundary {
             save(&dir, &trainer, &name, &command, &commit, true)?;
@@ -368,7 +385,7 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
             "best on validation: iteration {} ({} steps), {}: {}",
             b.iteration,
             b.env_steps,
-            validation_words(trainer.config.env, b),
+            validation_words(trainer.config.validation_env(), b),
             dir.best_path().display()
         );
     }

@@ -361,6 +361,12 @@ pub struct BankConfig {
     pub file: Option<String>,
     /// Share of episodes served from it, in [0, 1].
     pub fraction: f64,
+    /// Every this many iterations (a multiple of `ppo.checkpoint_every`), replace the bank with the
+    /// policy's own returns in `refresh_rallies` self-play rallies, so that it trains on the balls it
+    /// brings now; 0: never (the default). The refreshed bank is kept in the resumable state.
+    pub refresh_every: usize,
+    /// Self-play rallies a refresh plays.
+    pub refresh_rallies: usize,
 }
 
 impl Default for BankConfig {
@@ -368,11 +374,18 @@ impl Default for BankConfig {
         BankConfig {
             file: None,
             fraction: 0.5,
+            refresh_every: 0,
+            refresh_rallies: 200,
         }
     }
 }
 
 impl TrainConfig {
+    /// What validation plays: `[validation] env`, else the training environment.
+    pub fn validation_env(&self) -> TrainEnv {
+        self.validation.env.unwrap_or(self.env)
+    }
+
     /// The controller a method's checkpoints carry.
     pub fn controller(&self, method: Method, model: &sim::model::Model) -> ControllerSpec {
         match method {
@@ -396,7 +409,7 @@ impl TrainConfig {
     /// Refuses settings PPO cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         let p = &self.ppo;
-        let checks: [(&str, bool); 14] = [
+        let checks: [(&str, bool); 15] = [
             ("ppo.envs", p.envs >= 1),
             ("ppo.steps_per_env", p.steps_per_env >= 1),
             ("ppo.epochs", p.epochs >= 1),
@@ -429,6 +442,13 @@ impl TrainConfig {
                 self.validation.every == 0 || self.validation.episodes >= 1,
             ),
             ("bank.fraction", (0.0..=1.0).contains(&self.bank.fraction)),
+            (
+                "bank.refresh_every",
+                self.bank
+                    .refresh_every
+                    .is_multiple_of(p.checkpoint_every.max(1))
+                    && (self.bank.refresh_every == 0 || self.bank.refresh_rallies >= 1),
+            ),
             (
                 "controller.grip_floor",
                 (0.0..=1.0).contains(&self.controller.grip_floor),

@@ -145,6 +145,10 @@ impl RunDir {
         }
         let tensor_path = new.join("tensors.safetensors");
         candle_core::safetensors::save(&tensors, &tensor_path).map_err(|e| io(&tensor_path, e))?;
+        if let Some(balls) = &t.bank {
+            let bank = crate::env::BallBank::to_json(balls, serde_json::json!({"refreshed": true}));
+            write_atomic(&new.join("bank.json"), bank.to_string().as_bytes())?;
+        }
         let json = serde_json::to_vec(&state).map_err(|e| e.to_string())?;
         write_atomic(&new.join("state.json"), &json)?;
         let cur = self.resume_dir();
@@ -241,6 +245,12 @@ impl RunDir {
         t.adam = adam;
         t.normalizer = state.normalizer;
         t.progress = state.progress;
+        let bank = path.with_file_name("bank.json");
+        if bank.is_file() {
+            let text = fs::read_to_string(&bank).map_err(|e| io(&bank, e))?;
+            let balls = crate::env::BallBank::parse(&text).map_err(|e| io(&bank, e))?;
+            t.set_bank(balls.into());
+        }
         Ok(t)
     }
 

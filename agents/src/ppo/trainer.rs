@@ -38,6 +38,7 @@ const STREAM_WEIGHTS: u64 = 1;
 const STREAM_EPISODE: u64 = 2;
 const STREAM_NOISE: u64 = 3;
 const STREAM_MINIBATCH: u64 = 4;
+const STREAM_BANK: u64 = 5;
 
 /// One finished training episode.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -300,6 +301,8 @@ pub struct Trainer {
     pub progress: Progress,
     /// This process's time split.
     pub timing: Timing,
+    /// The ball bank the last refresh recorded (`[bank] refresh_every`); `None`: the file's, if any.
+    pub bank: Option<Arc<[sim::ball::BallState]>>,
     slots: Vec<Slot>,
     obs_dim: usize,
     act_dim: usize,
@@ -426,6 +429,7 @@ impl Trainer {
                 validations: Vec::new(),
             },
             timing: Timing::default(),
+            bank: None,
             slots,
             obs_dim,
             act_dim,
@@ -776,7 +780,7 @@ impl Trainer {
             "",
         )?));
         let (config, preset) = (ArenaConfig::default(), sim::arena::MYOCHALLENGE);
-        let (score, longest) = match v.env.unwrap_or(self.config.env) {
+        let (score, longest) = match self.config.validation_env() {
             TrainEnv::Rally => {
                 let spec = crate::matchrun::MatchSpec {
                     model: self.model.clone(),
@@ -815,6 +819,42 @@ impl Trainer {
             episodes: v.episodes,
             longest,
         })
+    }
+
+    /// Replaces the single-serve environments' ball bank with `balls` (served in `[bank] fraction`
+    /// of the episodes from the next segment on).
+    pub fn set_bank(&mut self, balls: Arc<[sim::ball::BallState]>) {
+        let fraction = self.config.bank.fraction;
+        for s in &mut self.slots {
+            if let TrainingEnv::Single(env) = &mut s.env {
+                env.bank = Some(crate::env::BallBank {
+                    balls: balls.clone(),
+                    fraction,
+                });
+            }
+        }
+        self.bank = Some(balls);
+    }
+
+    /// Records the policy's own legal returns in `[bank] refresh_rallies` self-play rallies (their
+    /// seed from the run's seed and the iteration) and makes them the bank; returns how many. A
+    /// policy that returned nothing keeps the old bank.
+    pub fn refresh_bank(&mut self) -> Result<usize, String> {
+        let player =
+            crate::factory::PlayerSpec::Checkpoint(Arc::new(self.checkpoint("bank", "", "")?));
+        let spec = crate::matchrun::MatchSpec {
+            model: self.model.clone(),
+            config: ArenaConfig::default(),
+            preset: sim::arena::MYOCHALLENGE,
+            rallies: self.config.bank.refresh_rallies as u32,
+            seed: stream_seed(self.seed, STREAM_BANK, self.progress.iteration, 0),
+            replay: false,
+        };
+        let balls = crate::matchrun::record_returns(&spec, &player, &player)?;
+        if !balls.is_empty() {
+            self.set_bank(balls.clone().into());
+        }
+        Ok(balls.len())
     }
 
     /// The policy as a checkpoint in the agents' format, named `name`, with its provenance.
