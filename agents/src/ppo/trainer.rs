@@ -311,11 +311,25 @@ pub struct Trainer {
     model: Arc<Model>,
 }
 
+/// The ball bank `[bank] file` names, read once for every environment; `None` without a file.
+fn read_bank(config: &TrainConfig) -> Result<Option<crate::env::BallBank>, String> {
+    let Some(file) = &config.bank.file else {
+        return Ok(None);
+    };
+    let text = std::fs::read_to_string(file).map_err(|e| format!("bank.file {file}: {e}"))?;
+    let balls = crate::env::BallBank::parse(&text).map_err(|e| format!("bank.file {file}: {e}"))?;
+    Ok(Some(crate::env::BallBank {
+        balls: balls.into(),
+        fraction: config.bank.fraction,
+    }))
+}
+
 /// The training environment a method runs in; its observation and action sizes.
 fn make_env(
     model: &Arc<Model>,
     controller: &ControllerSpec,
     config: &TrainConfig,
+    bank: Option<&crate::env::BallBank>,
 ) -> Result<(TrainingEnv, usize, usize), String> {
     // Both environments: the default arena, MyoChallenge contact laws, every observation block.
     let (arena, preset, blocks) = (
@@ -338,16 +352,7 @@ fn make_env(
             )?;
             env.end = EpisodeEnd::Training;
             env.grip_floor = grip_floor;
-            if let Some(file) = &config.bank.file {
-                let text =
-                    std::fs::read_to_string(file).map_err(|e| format!("bank.file {file}: {e}"))?;
-                let balls = crate::env::BallBank::parse(&text)
-                    .map_err(|e| format!("bank.file {file}: {e}"))?;
-                env.bank = Some(crate::env::BallBank {
-                    balls: balls.into(),
-                    fraction: config.bank.fraction,
-                });
-            }
+            env.bank = bank.cloned();
             let (o, a) = (env.obs_dim(), env.action_dim());
             (TrainingEnv::Single(Box::new(env)), o, a)
         }
@@ -390,7 +395,8 @@ impl Trainer {
     ) -> Result<Trainer, String> {
         config.validate()?;
         let controller = config.controller(method, &model);
-        let (_, obs_dim, act_dim) = make_env(&model, &controller, &config)?;
+        let bank = read_bank(&config)?;
+        let (_, obs_dim, act_dim) = make_env(&model, &controller, &config, bank.as_ref())?;
         let agents = config.env.agents();
         let p = &config.ppo;
         let net = ActorCritic::new(
@@ -405,7 +411,7 @@ impl Trainer {
         let slots = (0..p.envs)
             .map(|_| {
                 Ok(Slot {
-                    env: make_env(&model, &controller, &config)?.0,
+                    env: make_env(&model, &controller, &config, bank.as_ref())?.0,
                     episode: 0,
                     running: vec![Running::default(); agents],
                 })
@@ -782,14 +788,7 @@ impl Trainer {
         let (config, preset) = (ArenaConfig::default(), sim::arena::MYOCHALLENGE);
         let (score, longest) = match self.config.validation_env() {
             TrainEnv::Rally => {
-                let spec = crate::matchrun::MatchSpec {
-                    model: self.model.clone(),
-                    config,
-                    preset,
-                    rallies: v.episodes as u32,
-                    seed: v.seed,
-                    replay: false,
-                };
+                let spec = self.match_spec(v.episodes as u32, v.seed);
                 let lengths: Vec<u32> = crate::matchrun::play_rallies(&spec, &player, &player)?
                     .iter()
                     .map(|r| r.length)
@@ -821,6 +820,19 @@ impl Trainer {
         })
     }
 
+    /// A match of `rallies` rallies on `seed` in the default arena (MyoChallenge contact laws),
+    /// without replay: what validation and the bank's refresh play.
+    fn match_spec(&self, rallies: u32, seed: u64) -> crate::matchrun::MatchSpec {
+        crate::matchrun::MatchSpec {
+            model: self.model.clone(),
+            config: ArenaConfig::default(),
+            preset: sim::arena::MYOCHALLENGE,
+            rallies,
+            seed,
+            replay: false,
+        }
+    }
+
     /// Replaces the single-serve environments' ball bank with `balls` (served in `[bank] fraction`
     /// of the episodes from the next segment on).
     pub fn set_bank(&mut self, balls: Arc<[sim::ball::BallState]>) {
@@ -842,14 +854,10 @@ impl Trainer {
     pub fn refresh_bank(&mut self) -> Result<usize, String> {
         let player =
             crate::factory::PlayerSpec::Checkpoint(Arc::new(self.checkpoint("bank", "", "")?));
-        let spec = crate::matchrun::MatchSpec {
-            model: self.model.clone(),
-            config: ArenaConfig::default(),
-            preset: sim::arena::MYOCHALLENGE,
-            rallies: self.config.bank.refresh_rallies as u32,
-            seed: stream_seed(self.seed, STREAM_BANK, self.progress.iteration, 0),
-            replay: false,
-        };
+        let spec = self.match_spec(
+            self.config.bank.refresh_rallies as u32,
+            stream_seed(self.seed, STREAM_BANK, self.progress.iteration, 0),
+        );
         let balls = crate::matchrun::record_returns(&spec, &player, &player)?;
         if !balls.is_empty() {
             self.set_bank(balls.clone().into());
