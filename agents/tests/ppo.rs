@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use agents::ppo::store::RunDir;
+use agents::ppo::store::{RunDir, WarmOptimiser};
 use agents::ppo::trainer::Trainer;
 use agents::ppo::{Method, TrainConfig};
 
@@ -269,4 +269,42 @@ fn a_refreshed_bank_is_kept_in_the_resumable_state_and_served() {
     }
     assert_eq!(weights(&resumed), weights(&straight));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_warm_start_carries_the_optimiser_so_its_first_update_stays_near_the_start() {
+    // From the committed Diff-Muscle run (its adaptive schedule at the 1e-5 floor): the warm start
+    // takes its moments and learning rate, and the first iteration's policy change stays near the
+    // schedule's target. With a fresh optimiser at the configured 5e-4 — what warm starts did — the
+    // same iteration moves the policy far further.
+    let run = RunDir::open(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../runs/kmac"
+    )))
+    .unwrap();
+    let saved = run.read_state().unwrap();
+    let mut cfg = TrainConfig::default();
+    cfg.ppo.envs = 16;
+    cfg.ppo.steps_per_env = 32;
+    let first_kl = |fresh: bool| {
+        let mut t = Trainer::new(model(), Method::Kmac, cfg.clone(), 3).unwrap();
+        let how = if fresh {
+            WarmOptimiser::Fresh
+        } else {
+            WarmOptimiser::Carry
+        };
+        run.warm_start(&mut t, how).unwrap();
+        assert_eq!(t.progress.iteration, 0);
+        if fresh {
+            assert_eq!(t.adam.lr, cfg.ppo.learning_rate);
+        } else {
+            assert_eq!(t.adam.lr, saved.learning_rate);
+            assert_eq!(t.adam.t, saved.adam_steps);
+        }
+        t.iterate().unwrap().kl
+    };
+    let (carried, fresh) = (first_kl(false), first_kl(true));
+    eprintln!("first-iteration KL: optimiser carried {carried:.4}, fresh {fresh:.4}");
+    assert!(carried < 3.0 * cfg.ppo.desired_kl, "{carried}");
+    assert!(fresh > 5.0 * carried, "{fresh} vs {carried}");
 }

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use agents::ppo::store::RunDir;
+use agents::ppo::store::{RunDir, WarmOptimiser};
 use agents::ppo::trainer::Trainer;
 use agents::ppo::{Method, TrainConfig, TrainEnv};
 
@@ -51,7 +51,7 @@ fn the_serve_box_term_is_paid_once_the_policy_returns_balls() {
         "/../runs/kmac"
     )))
     .unwrap();
-    run.warm_start(&mut warm)
+    run.warm_start(&mut warm, WarmOptimiser::Carry)
         .expect("runs/kmac warm-starts a rally run");
     assert!(warm.progress.warm_start.is_some());
     let (warm_dual, warm_n) = dual_per_episode(&mut warm, 4);
@@ -104,7 +104,7 @@ fn validation_scores_the_policy_and_leaves_the_run_unchanged() {
     .unwrap();
     let warm = |seed| {
         let mut t = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), seed).unwrap();
-        run.warm_start(&mut t).unwrap();
+        run.warm_start(&mut t, WarmOptimiser::Carry).unwrap();
         t
     };
     let (mut plain, mut validated) = (warm(9), warm(9));

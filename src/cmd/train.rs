@@ -39,10 +39,16 @@ pub struct TrainArgs {
     /// configuration's.
     #[arg(long, value_parser = parse_serve)]
     serve: Option<TrainServe>,
-    /// Start from the weights and observation statistics of the run in this directory (a warm start,
-    /// e.g. --env rally --init runs/kmac); the optimiser and the counters start fresh.
+    /// Start from the weights, observation statistics and optimiser (its adaptive learning rate too)
+    /// of the run in this directory (a warm start, e.g. --env rally --init runs/kmac); the counters
+    /// and the curve start fresh.
     #[arg(long, conflicts_with = "resume")]
     init: Option<PathBuf>,
+    /// With --init: carry the start's optimiser (moments and learning rate, as rsl_rl loads one) or
+    /// start a fresh one at the configured learning rate, whose first update moves a trained policy
+    /// far (how the committed runs before 2026-12-02 were made; re-make them with `fresh`).
+    #[arg(long, value_enum, default_value = "carry", requires = "init")]
+    init_optimizer: InitOptimizer,
     /// Control steps to simulate in all (every environment's steps count), e.g. 2000000 or 2e6.
     #[arg(long, value_parser = parse_steps)]
     steps: u64,
@@ -291,7 +297,7 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         let mut t = Trainer::new(model, args.method, config, args.seed).map_err(|e| anyhow!(e))?;
         if let Some(init) = &args.init {
             RunDir::open(init)
-                .and_then(|d| d.warm_start(&mut t))
+                .and_then(|d| d.warm_start(&mut t, args.init_optimizer.into()))
                 .map_err(|e| CliError::Usage(format!("--init: {e}")))?;
         }
         t
@@ -396,4 +402,22 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         );
     }
     Ok(())
+}
+
+/// `--init-optimizer`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum InitOptimizer {
+    /// The start's moments and learning rate.
+    Carry,
+    /// A fresh optimiser at the configured learning rate.
+    Fresh,
+}
+
+impl From<InitOptimizer> for agents::ppo::store::WarmOptimiser {
+    fn from(o: InitOptimizer) -> Self {
+        match o {
+            InitOptimizer::Carry => Self::Carry,
+            InitOptimizer::Fresh => Self::Fresh,
+        }
+    }
 }

@@ -65,6 +65,16 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
     fs::rename(&tmp, path).map_err(|e| io(path, e))
 }
 
+/// What a warm start does with the optimiser of the run it starts from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum WarmOptimiser {
+    /// Take its moments, step count and adaptive learning rate (rsl_rl's `load`; the default).
+    #[default]
+    Carry,
+    /// A fresh Adam at the configured learning rate (how warm starts were made before 2026-12-02).
+    Fresh,
+}
+
 /// The run directory `dir`.
 pub struct RunDir {
     /// Its path.
@@ -230,19 +240,7 @@ impl RunDir {
         let (path, tensors) = self.read_tensors()?;
         let mut t = Trainer::new(model, state.method, state.config.clone(), state.seed)?;
         Self::set_net(&mut t, &path, &tensors)?;
-        let mut adam = Adam::new(t.net.vars(), state.learning_rate).map_err(|e| io(&path, e))?;
-        for k in 0..adam.m.len() {
-            let take = |name: String| {
-                tensors
-                    .get(&name)
-                    .cloned()
-                    .ok_or_else(|| io(&path, format!("no tensor '{name}'")))
-            };
-            adam.m[k] = take(format!("adam.m.{k}"))?;
-            adam.v[k] = take(format!("adam.v.{k}"))?;
-        }
-        adam.t = state.adam_steps;
-        t.adam = adam;
+        Self::set_adam(&mut t, &state, &path, &tensors)?;
         t.normalizer = state.normalizer;
         t.progress = state.progress;
         let bank = path.with_file_name("bank.json");
@@ -254,9 +252,36 @@ impl RunDir {
         Ok(t)
     }
 
-    /// Starts the fresh run `t` from this run's policy, critic and observation statistics (a warm
-    /// start): the method must be the same; the optimiser, counters and curve stay fresh.
-    pub fn warm_start(&self, t: &mut Trainer) -> Result<(), String> {
+    /// Puts the saved optimiser (moments, step count, the adaptive schedule's learning rate) into `t`.
+    fn set_adam(
+        t: &mut Trainer,
+        state: &RunState,
+        path: &Path,
+        tensors: &HashMap<String, Tensor>,
+    ) -> Result<(), String> {
+        let mut adam = Adam::new(t.net.vars(), state.learning_rate).map_err(|e| io(path, e))?;
+        for k in 0..adam.m.len() {
+            let take = |name: String| {
+                tensors
+                    .get(&name)
+                    .cloned()
+                    .ok_or_else(|| io(path, format!("no tensor '{name}'")))
+            };
+            adam.m[k] = take(format!("adam.m.{k}"))?;
+            adam.v[k] = take(format!("adam.v.{k}"))?;
+        }
+        adam.t = state.adam_steps;
+        t.adam = adam;
+        Ok(())
+    }
+
+    /// Starts the fresh run `t` from this run's policy, critic, observation statistics and optimiser
+    /// (a warm start): the method must be the same; the counters and the curve start fresh. The
+    /// optimiser comes along as rsl_rl's `load` brings it (moments and the adaptive schedule's
+    /// learning rate): with a fresh one the first update ran at the configured rate and threw the
+    /// policy far from its start (KL 1.2–2.0 in the first iteration against ~0.013 after it);
+    /// [`WarmOptimiser::Fresh`] keeps that behaviour, to re-make the runs made with it.
+    pub fn warm_start(&self, t: &mut Trainer, optimiser: WarmOptimiser) -> Result<(), String> {
         let state = self.read_state()?;
         if state.method != t.method {
             return Err(format!(
@@ -276,12 +301,19 @@ impl RunDir {
         }
         let (path, tensors) = self.read_tensors()?;
         Self::set_net(t, &path, &tensors)?;
+        if optimiser == WarmOptimiser::Carry {
+            Self::set_adam(t, &state, &path, &tensors)?;
+        }
         t.normalizer = state.normalizer;
         t.progress.warm_start = Some(format!(
-            "{} ({} steps, iteration {})",
+            "{} ({} steps, iteration {}; optimiser {})",
             self.dir.display(),
             state.progress.env_steps,
-            state.progress.iteration
+            state.progress.iteration,
+            match optimiser {
+                WarmOptimiser::Carry => "carried",
+                WarmOptimiser::Fresh => "fresh",
+            }
         ));
         Ok(())
     }

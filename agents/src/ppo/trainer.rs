@@ -928,6 +928,7 @@ impl Trainer {
                 warm_start: self.progress.warm_start.clone(),
                 rally_length: (self.config.env == TrainEnv::Rally).then_some(last.rally_length),
                 note: None,
+                noise_scale: None,
             }),
         })
     }
