@@ -142,6 +142,11 @@ pub fn play_episode(
     serve_seed: u64,
 ) -> EpisodeResult {
     env.reset(kind, &mut Rng::seeded(serve_seed), None);
+    play_reset_episode(env, player)
+}
+
+/// Plays the episode `env` was just reset to (any serve, e.g. a bank ball) with `player`.
+pub fn play_reset_episode(env: &mut SingleServe, player: &mut dyn Player) -> EpisodeResult {
     player.reset();
     let model = env.robot.held_model().clone();
     let muscles: Vec<usize> = model.muscles().map(|(i, _)| i).collect();
