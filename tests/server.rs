@@ -253,10 +253,40 @@ fn continuous_mode_fills_the_leaderboard() {
     loop {
         let board: Leaderboard = get_as(&srv.addr, "/api/v1/leaderboard");
         // Two workers queue concurrently, so an agent can be picked twice before another once:
-        // after twice as many matches as agents, every built-in has played (the most uncertain
-        // agent is picked first).
-        if board.matches >= 2 * board.rows.len() {
+        // after twice as many rated matches as agents (one match in three is cooperative), every
+        // built-in has played (the most uncertain agent is picked first).
+        if board.matches >= 3 * board.rows.len() {
             assert!(board.rows.iter().all(|r| r.matches > 0), "{board:?}");
+            // The first match, and every third, is an agent against itself: the best qualified
+            // first. It counts in its rally statistics and rates nothing.
+            let all: MatchList = get_as(&srv.addr, "/api/v1/matches?status=done&limit=1000");
+            let cooperative: Vec<_> = all
+                .matches
+                .iter()
+                .filter(|m| m.agent_a == m.agent_b)
+                .collect();
+            assert!(
+                cooperative.len() >= board.matches / 3 - 1,
+                "{} of {}",
+                cooperative.len(),
+                board.matches
+            );
+            let first = all.matches.iter().min_by_key(|m| m.id).unwrap();
+            assert_eq!(first.agent_a, first.agent_b, "{first:?}");
+            let best = board
+                .rows
+                .iter()
+                .max_by(|p, q| {
+                    p.success_rate
+                        .unwrap_or(-1.0)
+                        .total_cmp(&q.success_rate.unwrap_or(-1.0))
+                        .then(q.agent_id.cmp(&p.agent_id))
+                })
+                .unwrap();
+            assert!(
+                cooperative.iter().any(|m| m.agent_a == best.agent_id),
+                "{best:?}"
+            );
             // Continuous-mode matches keep no frames: the replay is re-simulated, and equals the
             // frames `rally match` writes for the same agents and seed.
             let list: MatchList = get_as(&srv.addr, "/api/v1/matches?status=done&limit=1");

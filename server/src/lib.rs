@@ -50,6 +50,11 @@ pub struct Settings {
     pub continuous_rallies: u32,
     /// Least time between two matches queued by the continuous mode, s.
     pub continuous_pause_s: f64,
+    /// Every this many matches, continuous mode queues a cooperative one: an agent against itself
+    /// (it rates nothing; it fills the rally-length and drift statistics, which a strong agent's
+    /// matches against weak ones leave short). 0: never.
+    #[serde(default = "default_self_play_every")]
+    pub continuous_self_play_every: u32,
     /// Most rallies a requested match may have.
     pub max_rallies: u32,
     /// Qualification episodes run for a submitted agent.
@@ -83,6 +88,10 @@ pub struct Settings {
     /// `HOST:PID`.
     #[serde(default)]
     pub worker_name: String,
+}
+
+fn default_self_play_every() -> u32 {
+    3
 }
 
 fn default_lease_s() -> f64 {

@@ -84,7 +84,7 @@ pub struct Row {
     pub builtin: bool,
     /// Bradley–Terry rating (Elo scale).
     pub rating: f64,
-    /// 95% bootstrap interval (null without a finished match).
+    /// 95% bootstrap interval (null without a finished match against another agent).
     pub rating_low: Option<f64>,
     /// Upper end.
     pub rating_high: Option<f64>,
@@ -201,7 +201,9 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
             }
             let mean =
                 |xs: Vec<f64>| (!xs.is_empty()).then(|| xs.iter().sum::<f64>() / xs.len() as f64);
-            let interval = if mine.is_empty() || boot[i].is_empty() {
+            // Matches against itself rate nothing: without another opponent there is no interval.
+            let rated = mine.iter().any(|o| o.0 != o.1);
+            let interval = if !rated || boot[i].is_empty() {
                 (None, None)
             } else {
                 let mut s = boot[i].clone();
@@ -393,5 +395,32 @@ mod tests {
         assert!((same - expected).abs() < 1e-9);
         let (lo, hi) = sprt_bounds(0.05, 0.05);
         assert!((lo + 2.944_438_979).abs() < 1e-6 && (hi - 2.944_438_979).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_match_against_itself_counts_its_rallies_but_rates_nothing() {
+        let entrant = |id| Entrant {
+            id,
+            name: format!("a{id}"),
+            builtin: true,
+            hit_rate: None,
+            success_rate: None,
+        };
+        let agents = [entrant(1), entrant(2), entrant(3)];
+        let outcomes: Vec<Outcome> = vec![
+            (1, 2, 12, 8, 1.0, 3, None, None),
+            (3, 3, 10, 10, 4.5, 21, None, None),
+        ];
+        let board = leaderboard(&agents, &outcomes, &Extras::default());
+        let row = |id| board.rows.iter().find(|r| r.agent_id == id).unwrap();
+        let (one, three) = (row(1), row(3));
+        assert!(one.rating_low.is_some() && one.points_won_pct == Some(60.0));
+        assert_eq!((three.matches, three.max_rally_length), (1, Some(21)));
+        assert_eq!(three.mean_rally_length, Some(4.5));
+        assert_eq!((three.rating, three.points_won_pct), (1500.0, None));
+        assert!(
+            three.rating_low.is_none(),
+            "no interval without a rated match: continuous mode still counts it most uncertain"
+        );
     }
 }

@@ -17,7 +17,10 @@
 //! Continuous mode (`rally serve` only, [`spawn_background`]): when the queue is empty the server
 //! queues a match for the agent whose rating interval is widest (no interval counts as widest),
 //! against the opponent it has met least, at most one every `continuous_pause_s` seconds; any
-//! worker may play it. Continuous-mode matches store no replay frames (about 50 kB a rally even
+//! worker may play it. Every `continuous_self_play_every`-th match (the first included) is
+//! cooperative instead: an agent against itself, the one with the fewest such matches, best
+//! qualified first. It rates nothing (`domain::rating_update`) and fills the rally-length and drift
+//! statistics: against weaker partners a strong agent's rallies stay short. Continuous-mode matches store no replay frames (about 50 kB a rally even
 //! gzipped); `GET /matches/{id}/replay` re-simulates such a rally on request, bit-identical to the
 //! one played (rallies are independent: `agents::matchrun::replay_rally`).
 
@@ -301,6 +304,19 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
         return Ok(false);
     }
     let agents = db::agents(&state.pool).await?;
+    let (matches_so_far,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM matches")
+        .fetch_one(&state.pool)
+        .await?;
+    let every = i64::from(state.settings.continuous_self_play_every);
+    if every > 0 && matches_so_far % every == 0 && !agents.is_empty() {
+        let self_played: Vec<(i64, i64)> = sqlx::query_as(
+            "SELECT agent_a, COUNT(*) FROM matches WHERE agent_a = agent_b AND status <> 'cancelled' AND status <> 'failed' GROUP BY agent_a",
+        )
+        .fetch_all(&state.pool)
+        .await?;
+        let agent = cooperative_pick(&agents, &self_played).expect("an agent");
+        return queue_continuous_match(state, agent, agent).await;
+    }
     if agents.len() < 2 {
         return Ok(false);
     }
@@ -354,6 +370,40 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     } else {
         (second, first)
     };
+    queue_continuous_match(state, a, b).await
+}
+
+/// The agent of continuous mode's next cooperative match: the fewest such matches so far
+/// (`self_played`: agent id, count), then the highest qualification success rate (none: last), then
+/// the lowest id — so a fresh server shows its best rally player's rallies first.
+fn cooperative_pick<'a>(
+    agents: &'a [db::Agent],
+    self_played: &[(i64, i64)],
+) -> Option<&'a db::Agent> {
+    let count = |id: i64| {
+        self_played
+            .iter()
+            .find(|(a, _)| *a == id)
+            .map_or(0, |(_, n)| *n)
+    };
+    agents.iter().min_by(|p, q| {
+        count(p.id)
+            .cmp(&count(q.id))
+            .then(
+                q.success_rate
+                    .unwrap_or(-1.0)
+                    .total_cmp(&p.success_rate.unwrap_or(-1.0)),
+            )
+            .then(p.id.cmp(&q.id))
+    })
+}
+
+/// Queues continuous mode's match of `a` against `b`, without replay frames.
+async fn queue_continuous_match(
+    state: &AppState,
+    a: &db::Agent,
+    b: &db::Agent,
+) -> anyhow::Result<bool> {
     // Distinct seeds for distinct matches (the next id; results not yet known do not repeat it).
     let (last_id,): (i64,) = sqlx::query_as("SELECT COALESCE(MAX(id), 0) FROM matches")
         .fetch_one(&state.pool)
@@ -549,4 +599,35 @@ pub fn spawn_background(state: AppState, shutdown: Arc<Notify>) -> Vec<JoinHandl
         }
     }));
     tasks
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn agent(id: i64, success_rate: Option<f64>) -> db::Agent {
+        db::Agent {
+            id,
+            name: format!("a{id}"),
+            kind: crate::domain::AgentKind::Checkpoint,
+            spec_hash: String::new(),
+            builtin: true,
+            created_at: String::new(),
+            qual_episodes: success_rate.map(|_| 100),
+            hit_rate: success_rate,
+            success_rate,
+            effort: None,
+        }
+    }
+
+    #[test]
+    fn the_cooperative_pick_takes_the_fewest_then_the_best_qualified() {
+        let agents = [agent(1, None), agent(2, Some(0.4)), agent(3, Some(0.78))];
+        let pick = |played: &[(i64, i64)]| cooperative_pick(&agents, played).unwrap().id;
+        assert_eq!(pick(&[]), 3, "the best qualified first");
+        assert_eq!(pick(&[(3, 1)]), 2);
+        assert_eq!(pick(&[(3, 1), (2, 1)]), 1, "then the unqualified");
+        assert_eq!(pick(&[(3, 1), (2, 1), (1, 1)]), 3, "and round again");
+        assert!(cooperative_pick(&[], &[]).is_none());
+    }
 }
