@@ -99,3 +99,70 @@ fn checkpoint_templates_validate_and_play_and_broken_ones_are_named() {
         Some(2)
     );
 }
+
+#[test]
+fn scale_noise_writes_the_same_network_with_scaled_noise_and_records_it() {
+    let dir = std::env::temp_dir().join(format!("rally-noise-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let src = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/checkpoints/kmac-rally.json"
+    );
+    let read = |p: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (half, quarter) = (dir.join("half.json"), dir.join("quarter.json"));
+    let scale = |from: &str, to: &std::path::Path, factor: &str| {
+        rally(&[
+            "checkpoint",
+            "scale-noise",
+            from,
+            "--factor",
+            factor,
+            "--out",
+            to.to_str().unwrap(),
+        ])
+    };
+    let out = scale(src, &half, "0.5");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(scale(half.to_str().unwrap(), &quarter, "0.5")
+        .status
+        .success());
+    let (orig, h, q) = (read(src.as_ref()), read(&half), read(&quarter));
+    let std = |v: &serde_json::Value| -> Vec<f64> {
+        v["policy_std"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    for ((o, h1), q1) in std(&orig).iter().zip(std(&h)).zip(std(&q)) {
+        assert_eq!((h1, q1), (0.5 * o, 0.25 * o));
+    }
+    assert_eq!(h["policy"], orig["policy"], "the network is untouched");
+    assert_eq!(h["training"]["noise_scale"], 0.5);
+    assert_eq!(q["training"]["noise_scale"], 0.25);
+    // Bad factors and writing over the input are refused, and nothing is written.
+    let none = dir.join("none.json");
+    for f in ["-1", "nan", "inf"] {
+        let out = rally(&[
+            "checkpoint",
+            "scale-noise",
+            src,
+            &format!("--factor={f}"),
+            "--out",
+            none.to_str().unwrap(),
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{f}");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("--factor"));
+    }
+    assert!(!none.exists());
+    let over = scale(half.to_str().unwrap(), &half, "0.5");
+    assert_eq!(over.status.code(), Some(2));
+    assert_eq!(read(&half)["training"]["noise_scale"], 0.5);
+}

@@ -202,6 +202,10 @@ pub struct Training {
     /// provenance must know.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// `policy_std` is the trained σ times this (`rally checkpoint scale-noise`); absent: 1, the
+    /// checkpoint plays with the noise it was trained with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_scale: Option<f64>,
 }
 
 fn single_env() -> String {
@@ -370,6 +374,28 @@ fn bad(field: impl Into<String>, message: impl Into<String>) -> CheckpointError 
 }
 
 impl Checkpoint {
+    /// Multiplies the action noise it plays with (`policy_std`) by `factor` ≥ 0 and records the
+    /// product of all such factors in its provenance (a checkpoint without one keeps none).
+    pub fn scale_noise(&mut self, factor: f64) -> Result<(), CheckpointError> {
+        if !(factor.is_finite() && factor >= 0.0) {
+            return Err(bad(
+                "factor",
+                format!("{factor}: expected a finite number ≥ 0"),
+            ));
+        }
+        let std = self.policy_std.as_mut().ok_or_else(|| {
+            bad(
+                "policy_std",
+                "absent: the checkpoint plays its mean action, there is no noise to scale",
+            )
+        })?;
+        std.iter_mut().for_each(|s| *s *= factor);
+        if let Some(t) = self.training.as_mut() {
+            t.noise_scale = Some(t.noise_scale.unwrap_or(1.0) * factor);
+        }
+        Ok(())
+    }
+
     /// Parses and validates a checkpoint for `model`.
     pub fn from_json(text: &str, model: &Model) -> Result<Checkpoint, CheckpointError> {
         if text.len() > MAX_BYTES {

@@ -44,6 +44,26 @@ enum CheckpointCommand {
         /// Checkpoint file.
         file: PathBuf,
     },
+    /// Write a trained checkpoint that plays with FACTOR times the Gaussian action noise it was
+    /// trained with (its `policy_std`): the same network, less (or more) exploration noise in play.
+    /// The factor is kept in its provenance (`training.noise_scale`), so the trained σ is still known.
+    /// Example: rally checkpoint scale-noise runs/x/best.json --factor 0.5 --out half.json
+    ScaleNoise {
+        /// Checkpoint file.
+        file: PathBuf,
+        /// Multiplies every entry of `policy_std` (0: play the mean action).
+        #[arg(long)]
+        factor: f64,
+        /// Name stored in the new checkpoint (default: the old one's).
+        #[arg(long)]
+        name: Option<String>,
+        /// Where to write it (not the input file).
+        #[arg(long)]
+        out: PathBuf,
+        /// Appended to its provenance note: why this factor (e.g. how it was chosen).
+        #[arg(long)]
+        note: Option<String>,
+    },
 }
 
 /// Runs `rally checkpoint`.
@@ -107,6 +127,58 @@ pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
                     ),
                     None => "ONNX network".to_string(),
                 }
+            );
+            Ok(())
+        }
+        CheckpointCommand::ScaleNoise {
+            file,
+            factor,
+            name,
+            out,
+            note,
+        } => {
+            if !(factor.is_finite() && *factor >= 0.0) {
+                return Err(CliError::Usage(format!(
+                    "--factor {factor}: expected a finite number ≥ 0"
+                )));
+            }
+            let same = |a: &PathBuf, b: &PathBuf| match (a.canonicalize(), b.canonicalize()) {
+                (Ok(x), Ok(y)) => x == y,
+                _ => false,
+            };
+            if same(file, out) {
+                return Err(CliError::Usage(
+                    "--out: give another file than the input".into(),
+                ));
+            }
+            let text = std::fs::read_to_string(file)
+                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+            let mut c = Checkpoint::from_json(&text, &model)
+                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+            c.scale_noise(*factor)
+                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+            if let Some(n) = name {
+                c.name = n.clone();
+            }
+            if let (Some(t), Some(extra)) = (c.training.as_mut(), note) {
+                t.note = Some(match t.note.take() {
+                    Some(old) => format!("{old} {extra}"),
+                    None => extra.clone(),
+                });
+            }
+            c.validate(&model)
+                .map_err(|e| CliError::Usage(e.to_string()))?;
+            let json = serde_json::to_string(&c).map_err(anyhow::Error::from)?;
+            std::fs::write(out, json)
+                .map_err(|e| CliError::Usage(format!("{}: {e}", out.display())))?;
+            println!(
+                "{}: '{}' plays with {} × its trained action noise",
+                out.display(),
+                c.name,
+                c.training
+                    .as_ref()
+                    .and_then(|t| t.noise_scale)
+                    .unwrap_or(*factor)
             );
             Ok(())
         }
