@@ -423,6 +423,14 @@ async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
         if let Some(existing) = db::agent_by_name(&state.pool, &name).await? {
             if !existing.builtin {
                 tracing::warn!(%name, "a submitted agent holds the name of a built-in checkpoint; keeping it");
+            } else if std::fs::read_to_string(&path)
+                .is_ok_and(|text| db::spec_hash(&text) != existing.spec_hash)
+            {
+                tracing::warn!(
+                    %name,
+                    path = %path.display(),
+                    "the committed checkpoint differs from the built-in this database registered; keeping the registered one (its matches were played with it): a new database registers the new one"
+                );
             }
             continue;
         }
