@@ -308,3 +308,30 @@ fn a_warm_start_carries_the_optimiser_so_its_first_update_stays_near_the_start()
     assert!(carried < 3.0 * cfg.ppo.desired_kl, "{carried}");
     assert!(fresh > 5.0 * carried, "{fresh} vs {carried}");
 }
+
+#[test]
+fn validation_plays_and_keeps_the_policy_at_its_noise_scale() {
+    let mut cfg = small(2, 4, 10);
+    let plain = Trainer::new(model(), Method::Kmac, cfg.clone(), 4).unwrap();
+    let same = plain.validation_checkpoint("v", "", "").unwrap();
+    assert_eq!(
+        same,
+        plain.checkpoint("v", "", "").unwrap(),
+        "scale 1: as trained"
+    );
+    cfg.validation.noise_scale = 0.5;
+    let t = Trainer::new(model(), Method::Kmac, cfg.clone(), 4).unwrap();
+    let (trained, played) = (
+        t.checkpoint("v", "", "").unwrap(),
+        t.validation_checkpoint("v", "", "").unwrap(),
+    );
+    let (s0, s1) = (trained.policy_std.unwrap(), played.policy_std.unwrap());
+    assert!(s0.iter().zip(&s1).all(|(a, b)| *b == 0.5 * a && *a > 0.0));
+    assert_eq!(played.policy, trained.policy);
+    assert_eq!(played.training.unwrap().noise_scale, Some(0.5));
+    cfg.validation.noise_scale = -0.5;
+    assert_eq!(
+        cfg.validate().unwrap_err(),
+        "validation.noise_scale: out of range"
+    );
+}

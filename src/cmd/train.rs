@@ -201,12 +201,18 @@ fn validate(
     let is_best = best_before.is_none_or(|b| point.score > b);
     if is_best {
         let mut ck = t
-            .checkpoint(name, command, commit)
+            .validation_checkpoint(name, command, commit)
             .map_err(|e| anyhow!(e))?;
         if let Some(tr) = ck.training.as_mut() {
             tr.note = Some(format!(
-                "The best of the run's validations so far: iteration {} ({} steps), {words}, validation seed {} (the same serves at every validation; report figures on other seeds).",
-                point.iteration, point.env_steps, t.config.validation.seed
+                "The best of the run's validations so far: iteration {} ({} steps), {words}, validation seed {} (the same serves at every validation; report figures on other seeds){}.",
+                point.iteration,
+                point.env_steps,
+                t.config.validation.seed,
+                match t.config.validation.noise_scale {
+                    1.0 => String::new(),
+                    s => format!("; validated, and kept, at {s} × its trained action noise"),
+                }
             ));
         }
         let json = serde_json::to_vec(&ck).map_err(anyhow::Error::from)?;

@@ -780,7 +780,7 @@ impl Trainer {
     /// Reads the weights and the observation statistics, changes nothing.
     pub fn validate(&self) -> Result<ValidationPoint, String> {
         let v = &self.config.validation;
-        let player = crate::factory::PlayerSpec::Checkpoint(Arc::new(self.checkpoint(
+        let player = crate::factory::PlayerSpec::Checkpoint(Arc::new(self.validation_checkpoint(
             "validation",
             "",
             "",
@@ -818,6 +818,22 @@ impl Trainer {
             episodes: v.episodes,
             longest,
         })
+    }
+
+    /// The checkpoint as validation plays it: [`Trainer::checkpoint`] with its noise scaled by
+    /// `[validation] noise_scale` (what `best.json` holds).
+    pub fn validation_checkpoint(
+        &self,
+        name: &str,
+        command: &str,
+        commit: &str,
+    ) -> Result<Checkpoint, String> {
+        let mut ck = self.checkpoint(name, command, commit)?;
+        let scale = self.config.validation.noise_scale;
+        if scale != 1.0 {
+            ck.scale_noise(scale).map_err(|e| e.to_string())?;
+        }
+        Ok(ck)
     }
 
     /// A match of `rallies` rallies on `seed` in the default arena (MyoChallenge contact laws),
