@@ -20,9 +20,10 @@
 //! worker may play it. Every `continuous_self_play_every`-th match (the first included) is
 //! cooperative instead: an agent against itself, the one with the fewest such matches, best
 //! qualified first. It rates nothing (`domain::rating_update`) and fills the rally-length and drift
-//! statistics: against weaker partners a strong agent's rallies stay short. Continuous-mode matches store no replay frames (about 50 kB a rally even
-//! gzipped); `GET /matches/{id}/replay` re-simulates such a rally on request, bit-identical to the
-//! one played (rallies are independent: `agents::matchrun::replay_rally`).
+//! statistics: against weaker partners a strong agent's rallies stay short. Continuous-mode
+//! matches store no replay frames (about 50 kB a rally even gzipped); `GET /matches/{id}/replay`
+//! re-simulates such a rally on request, bit-identical to the one played (rallies are
+//! independent: `agents::matchrun::replay_rally`).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -304,11 +305,8 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
         return Ok(false);
     }
     let agents = db::agents(&state.pool).await?;
-    let (matches_so_far,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM matches")
-        .fetch_one(&state.pool)
-        .await?;
     let every = i64::from(state.settings.continuous_self_play_every);
-    if every > 0 && matches_so_far % every == 0 && !agents.is_empty() {
+    if every > 0 && !agents.is_empty() && cooperative_turn(state, every).await? {
         let self_played: Vec<(i64, i64)> = sqlx::query_as(
             "SELECT agent_a, COUNT(*) FROM matches WHERE agent_a = agent_b AND status <> 'cancelled' AND status <> 'failed' GROUP BY agent_a",
         )
@@ -371,6 +369,14 @@ async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
         (second, first)
     };
     queue_continuous_match(state, a, b).await
+}
+
+/// Whether continuous mode's next match is cooperative: every `every`-th match, the first included.
+async fn cooperative_turn(state: &AppState, every: i64) -> anyhow::Result<bool> {
+    let (matches_so_far,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM matches")
+        .fetch_one(&state.pool)
+        .await?;
+    Ok(matches_so_far % every == 0)
 }
 
 /// The agent of continuous mode's next cooperative match: the fewest such matches so far
