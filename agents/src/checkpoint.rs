@@ -667,6 +667,7 @@ pub struct CheckpointPlayer {
     observer: Observer,
     mapper: ActionMapper,
     obs: Vec<f64>,
+    mean: Vec<f64>,
     seed: u64,
     noise: sim::rng::Rng,
 }
@@ -692,6 +693,7 @@ impl CheckpointPlayer {
             mapper: ActionMapper::new(model, &checkpoint.controller),
             checkpoint,
             obs: Vec::new(),
+            mean: Vec::new(),
             seed,
             noise: noise_stream(seed),
         })
@@ -700,6 +702,12 @@ impl CheckpointPlayer {
     /// The planner's current command (the plan and its absolute strike time), if a ball is coming.
     pub fn command(&self) -> Option<&(crate::planner::Plan, f64)> {
         self.observer.command()
+    }
+
+    /// The network's output at the last `act`: the mean of its Gaussian policy, before the noise
+    /// and the clip to [−1, 1], in the controller's layout.
+    pub fn last_mean(&self) -> &[f64] {
+        &self.mean
     }
 }
 
@@ -732,6 +740,7 @@ impl Player for CheckpointPlayer {
         if action.iter().any(|a| !a.is_finite()) {
             return Err(InvalidAction);
         }
+        self.mean.clone_from(&action);
         if let Some(std) = &self.checkpoint.policy_std {
             for (a, s) in action.iter_mut().zip(std) {
                 *a = (*a + s * self.noise.normal()).clamp(-1.0, 1.0);

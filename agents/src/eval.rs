@@ -28,6 +28,17 @@ pub struct EpisodeResult {
     pub effort: f64,
     /// Mean over control steps of ‖a‖₁ / n_a.
     pub mean_activation: f64,
+    /// Mean ‖a‖₁ / n_a over the steps up to and including the first paddle contact (the whole
+    /// episode when there is none): the part of an episode a training episode also plays.
+    pub activation_to_contact: f64,
+    /// Mean ‖a‖₁ / n_a over the steps after the first paddle contact (none without a contact or
+    /// when the episode ends on it): play no training episode reaches, as training episodes end
+    /// 3 steps after the ball leaves the paddle (DESIGN §11).
+    pub activation_after_contact: Option<f64>,
+    /// Control steps played.
+    pub steps: usize,
+    /// Control steps after the first paddle contact.
+    pub steps_after_contact: usize,
     /// How it ended: a failure's name, "SUCCESS", or "TIME_LIMIT".
     pub end: &'static str,
 }
@@ -118,6 +129,15 @@ pub struct EvalReport {
     pub effort: Mean,
     /// Mean activation (‖a‖₁ / n_a).
     pub mean_activation: Mean,
+    /// Mean activation up to and including the first contact (every episode).
+    #[serde(default)]
+    pub activation_to_contact: Option<Mean>,
+    /// Mean activation after the first contact (the episodes that play on after one).
+    #[serde(default)]
+    pub activation_after_contact: Option<Mean>,
+    /// Share of all control steps played after a first contact.
+    #[serde(default)]
+    pub after_contact_steps: Option<f64>,
     /// How many episodes ended each way.
     pub ends: Vec<(String, usize)>,
 }
@@ -153,6 +173,8 @@ pub fn play_reset_episode(env: &mut SingleServe, player: &mut dyn Player) -> Epi
     let na = muscles.len().max(1) as f64;
     let mut ctrl = vec![0.0; model.actuators.len()];
     let (mut effort, mut l1, mut steps) = (0.0, 0.0, 0usize);
+    // Activation summed up to and including the first contact, and the step count there.
+    let mut to_contact: Option<(f64, usize)> = None;
     loop {
         ctrl.copy_from_slice(&env.robot.state.ctrl);
         let ok = player
@@ -169,17 +191,25 @@ pub fn play_reset_episode(env: &mut SingleServe, player: &mut dyn Player) -> Epi
         effort += muscles.iter().map(|&a| act[a] * act[a]).sum::<f64>().sqrt() / na;
         l1 += muscles.iter().map(|&a| act[a].abs()).sum::<f64>() / na;
         steps += 1;
+        if env.hit && to_contact.is_none() {
+            to_contact = Some((l1, steps));
+        }
         if done {
             break;
         }
     }
     let end = end_name(env);
-    let steps = steps.max(1) as f64;
+    let (l1_to, steps_to) = to_contact.unwrap_or((l1, steps));
+    let steps_after = steps - steps_to;
     EpisodeResult {
         hit: env.hit,
         success: env.success,
-        effort: effort / steps,
-        mean_activation: l1 / steps,
+        effort: effort / steps.max(1) as f64,
+        mean_activation: l1 / steps.max(1) as f64,
+        activation_to_contact: l1_to / steps_to.max(1) as f64,
+        activation_after_contact: (steps_after > 0).then(|| (l1 - l1_to) / steps_after as f64),
+        steps,
+        steps_after_contact: steps_after,
         end,
     }
 }
@@ -267,6 +297,22 @@ pub fn evaluate(
                 .iter()
                 .map(|r| r.mean_activation)
                 .collect::<Vec<_>>(),
+        ),
+        activation_to_contact: Some(mean_interval(
+            &results
+                .iter()
+                .map(|r| r.activation_to_contact)
+                .collect::<Vec<_>>(),
+        )),
+        activation_after_contact: Some(mean_interval(
+            &results
+                .iter()
+                .filter_map(|r| r.activation_after_contact)
+                .collect::<Vec<_>>(),
+        )),
+        after_contact_steps: Some(
+            results.iter().map(|r| r.steps_after_contact).sum::<usize>() as f64
+                / results.iter().map(|r| r.steps).sum::<usize>().max(1) as f64,
         ),
         ends,
     })

@@ -63,6 +63,18 @@ fn print_table(r: &EvalReport) {
     };
     mean("effort", &r.effort);
     mean("mean activation", &r.mean_activation);
+    if let Some(m) = &r.activation_to_contact {
+        mean("  to contact", m);
+    }
+    if let (Some(m), Some(share)) = (&r.activation_after_contact, r.after_contact_steps) {
+        println!(
+            "    after contact  {:>8.4}   95% CI [{:.4}, {:.4}]   ({:.0}% of the steps)",
+            m.value,
+            m.low,
+            m.high,
+            100.0 * share
+        );
+    }
     let ends: Vec<String> = r.ends.iter().map(|(e, n)| format!("{e} {n}")).collect();
     println!("  endings          {}", ends.join(", "));
 }

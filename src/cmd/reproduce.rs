@@ -471,6 +471,35 @@ fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf>) -> Strin
             }
         }
     }
+    let _ = writeln!(s, "\n## Where the activation goes\n");
+    let _ = writeln!(
+        s,
+        "Training episodes end 3 steps after the ball leaves the paddle (as in the official code), while \
+         an evaluation plays every episode to its end by the rules: the steps after the first contact are \
+         play no method was trained on. Mean activation ‖a‖₁/n_a up to and including the first contact \
+         (every episode; all of it when there is none) and after it (the episodes that play on).\n"
+    );
+    let _ = writeln!(
+        s,
+        "| Method | Mean activation | To contact | After contact | Steps after contact |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|");
+    for r in rows {
+        if let Some(e) = &r.report {
+            let opt = |m: &Option<agents::eval::Mean>| m.as_ref().map(mean).unwrap_or("–".into());
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {} |",
+                r.label,
+                mean(&e.mean_activation),
+                opt(&e.activation_to_contact),
+                opt(&e.activation_after_contact),
+                e.after_contact_steps
+                    .map(|f| format!("{:.0}%", 100.0 * f))
+                    .unwrap_or("–".into())
+            );
+        }
+    }
     let _ = writeln!(s, "\n## How each episode ended\n");
     for r in rows {
         if let Some(e) = &r.report {

@@ -48,6 +48,19 @@ pub fn value_loss(
     a.maximum(&b)?.mean_all()
 }
 
+/// How far the policy's means lie past the action bounds: `mean over the batch of Σ_d
+/// max(|μ_d| − b, 0)²` (`mean` `[batch, n]`). The environment clips actions to [−1, 1], so a mean
+/// far past a bound gives the same clipped action for almost every sample: its surrogate gradient
+/// vanishes and nothing in the reward can bring it back (the bound loss of rl_games, the PPO of
+/// IsaacGymEnvs, answers the same; rsl_rl has none).
+pub fn bound_loss(mean: &Tensor, bound: f64) -> Result<Tensor> {
+    (mean.abs()? - bound)?
+        .relu()?
+        .sqr()?
+        .sum(D::Minus1)?
+        .mean_all()
+}
+
 /// Mean over the batch of KL(old ‖ new) between diagonal Gaussians, summed over the action entries:
 /// `Σ log(σ/σ_old) + (σ_old² + (μ_old − μ)²)/(2σ²) − ½`. `*_mean` `[batch, n]`, `*_log_std` `[n]`.
 pub fn gaussian_kl(
@@ -121,6 +134,25 @@ mod tests {
         // V = 1.5 overshoots: unclipped 0.25, clipped 0.64 → 0.64.
         let l = value_loss(&t(&[1.5]), &t(&[0.0]), &t(&[1.0]), 0.2).unwrap();
         assert!((scalar(&l) - 0.64).abs() < 1e-6);
+    }
+
+    #[test]
+    fn bound_loss_is_zero_inside_and_quadratic_past_the_bound() {
+        // Two samples of two entries: inside, at the bound, past it on either side.
+        let mean =
+            Var::from_tensor(&Tensor::new(&[[0.5f32, 1.0], [1.5, -3.0]], &Device::Cpu).unwrap())
+                .unwrap();
+        let loss = bound_loss(mean.as_tensor(), 1.0).unwrap();
+        // (0 + 0 + 0.25 + 4) / 2 samples.
+        assert!((scalar(&loss) - 2.125).abs() < 1e-6);
+        let g = loss.backward().unwrap();
+        let g = g.get(&mean).unwrap().to_vec2::<f32>().unwrap();
+        // d/dμ = 2 (|μ| − b) sign(μ) / 2: nothing inside, pulls back towards the bound past it.
+        assert_eq!(g[0], vec![0.0, 0.0]);
+        assert!((g[1][0] - 0.5).abs() < 1e-6, "{g:?}");
+        assert!((g[1][1] + 2.0).abs() < 1e-6, "{g:?}");
+        // A wider bound leaves these means alone.
+        assert_eq!(scalar(&bound_loss(mean.as_tensor(), 3.0).unwrap()), 0.0);
     }
 
     #[test]

@@ -170,6 +170,12 @@ pub struct PpoConfig {
     pub max_std: Option<[f64; 2]>,
     /// Env steps over which `max_std` falls from its first value to its second.
     pub max_std_steps: u64,
+    /// Weight of the bound loss (ours; rsl_rl has none, rl_games has it): the policy's means past
+    /// ±`bound` are pulled back by `bound_coef · mean Σ max(|μ| − bound, 0)²`
+    /// ([`loss::bound_loss`]). 0 (the default): off, rsl_rl's loss exactly.
+    pub bound_coef: f64,
+    /// Where the bound loss starts (the environment clips actions at ±1).
+    pub bound: f64,
 }
 
 impl PpoConfig {
@@ -207,6 +213,8 @@ impl Default for PpoConfig {
             reward_scale: 0.05,
             max_std: None,
             max_std_steps: 0,
+            bound_coef: 0.0,
+            bound: 1.0,
         }
     }
 }
@@ -414,7 +422,7 @@ impl TrainConfig {
     /// Refuses settings PPO cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         let p = &self.ppo;
-        let checks: [(&str, bool); 16] = [
+        let checks: [(&str, bool); 17] = [
             ("ppo.envs", p.envs >= 1),
             ("ppo.steps_per_env", p.steps_per_env >= 1),
             ("ppo.epochs", p.epochs >= 1),
@@ -433,6 +441,13 @@ impl TrainConfig {
             ),
             ("ppo.init_std", p.init_std > 0.0 && p.init_std.is_finite()),
             ("ppo.checkpoint_every", p.checkpoint_every >= 1),
+            (
+                "ppo.bound_coef",
+                p.bound_coef >= 0.0
+                    && p.bound_coef.is_finite()
+                    && p.bound > 0.0
+                    && p.bound.is_finite(),
+            ),
             (
                 "ppo.max_std",
                 p.max_std

@@ -747,9 +747,13 @@ impl Trainer {
                     loss::surrogate_loss(&logp, &logp_old, &adv_t, p.clip).map_err(e)?;
                 let value = loss::value_loss(&values, &v_old, &ret, p.clip).map_err(e)?;
                 let entropy = loss::entropy(log_std).map_err(e)?;
-                let total = (&surrogate + (&value * p.value_coef).map_err(e)?)
+                let mut total = (&surrogate + (&value * p.value_coef).map_err(e)?)
                     .and_then(|t| t - (&entropy * p.entropy_coef)?)
                     .map_err(e)?;
+                if p.bound_coef > 0.0 {
+                    let bound = loss::bound_loss(&mu, p.bound).map_err(e)?;
+                    total = (total + (bound * p.bound_coef).map_err(e)?).map_err(e)?;
+                }
                 let mut grads = total.backward().map_err(e)?;
                 clip_grad_norm(&mut grads, &vars, p.max_grad_norm).map_err(e)?;
                 self.adam.step(&grads).map_err(e)?;
