@@ -1,5 +1,5 @@
-//! `rally reproduce` through the binary, small: the Table I analogue and the dual-rally section are
-//! written with their plots, a pairing whose checkpoint is missing says so, and the same seed writes
+//! `rally reproduce` through the binary, small: the Table I analogue, the activation split and the
+//! dual-rally section are written with their plots, a pairing whose checkpoint is missing says so, and the same seed writes
 //! the same report.
 
 use std::process::Command;
@@ -34,6 +34,14 @@ fn reproduce_writes_the_table_and_the_rally_section() {
     let md = run("a/reproduce.md");
     assert!(md.contains("| Diff-Muscle |"), "{md}");
     assert!(md.contains("## Dual-robot rallies"), "{md}");
+    // The activation split: a row per evaluated method, its columns filled.
+    let split = md
+        .lines()
+        .skip_while(|l| !l.starts_with("## Where the activation goes"))
+        .find(|l| l.starts_with("| Diff-Muscle |"))
+        .unwrap_or_else(|| panic!("no activation split row: {md}"));
+    assert_eq!(split.matches(" | ").count(), 4, "{split}");
+    assert!(split.trim_end().ends_with("% |"), "{split}");
     assert!(md.contains("| kmac | kmac | "), "{md}");
     assert!(md.contains("| scripted | scripted | "), "{md}");
     assert!(
