@@ -3,14 +3,12 @@
 //! episode's activation spent before and after it, and how many muscles sit near full activation.
 //! A diagnosis aid: `cargo run --release -p agents --example activation_profile -- CHECKPOINT
 //! [episodes] [seed]`.
-use agents::checkpoint::{Checkpoint, CheckpointPlayer};
+mod common;
+
 use agents::player::Player;
-use sim::episode::SingleServe;
 use sim::events::ContactKind;
-use sim::predict::BounceModel;
 use sim::rng::Rng;
 use sim::serve::ServeKind;
-use std::sync::Arc;
 
 const BIN: f64 = 0.1;
 const FIRST: i64 = -12;
@@ -19,16 +17,12 @@ const LAST: i64 = 12;
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let path = args.first().expect("checkpoint file");
-    let episodes: usize = args.get(1).map(|s| s.parse().unwrap()).unwrap_or(200);
-    let seed: u64 = args.get(2).map(|s| s.parse().unwrap()).unwrap_or(4242);
-    let model = Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap());
-    let ck =
-        Arc::new(Checkpoint::from_json(&std::fs::read_to_string(path).unwrap(), &model).unwrap());
-    let preset = sim::arena::MYOCHALLENGE;
-    let bounce = BounceModel::for_table(&preset.table);
-    let config = sim::config::ArenaConfig::default();
-    let mut env = SingleServe::new(model.clone(), &config, preset).unwrap();
-    let mut player = CheckpointPlayer::new(ck.clone(), &model, bounce, 0).unwrap();
+    let episodes: usize = common::arg(&args, 1, 200);
+    let seed: u64 = common::arg(&args, 2, 4242);
+    let bench = common::Bench::load(path);
+    let (model, ck) = (bench.model.clone(), bench.checkpoint.clone());
+    let mut env = bench.single();
+    let mut player = bench.player();
     let muscles: Vec<usize> = model.muscles().map(|(i, _)| i).collect();
     let na = muscles.len() as f64;
     let nb = (LAST - FIRST) as usize;
@@ -54,12 +48,7 @@ fn main() {
         let mut trace: Vec<(f64, f64, f64)> = Vec::new();
         let mut t_hit: Option<f64> = None;
         loop {
-            ctrl.copy_from_slice(&env.robot.state.ctrl);
-            if player
-                .act(&env.robot, &env.world.ball, env.world.time, &mut ctrl)
-                .is_err()
-            {
-                env.invalid_action();
+            if !common::act(&mut player, &mut env, &mut ctrl) {
                 break;
             }
             if kmac {
@@ -79,7 +68,6 @@ fn main() {
                     gap[k] += (a * (1.0 + 2.0 * agents::controller::TARGET_MARGIN) - pos).abs();
                 }
             }
-            env.robot.state.ctrl.copy_from_slice(&ctrl);
             let rep = env.step();
             let act = &env.robot.state.act;
             let l1 = muscles.iter().map(|&a| act[a]).sum::<f64>() / na;

@@ -2,15 +2,15 @@
 //! each return) its spin, the planner's spin-free prediction of its bounce against the real bounce,
 //! and whether the receiver returned it. A diagnosis aid:
 //! `cargo run --release --example rally_balls -- CHECKPOINT [rallies] [seed] > balls.csv`.
-use agents::checkpoint::{Checkpoint, CheckpointPlayer};
+mod common;
+
 use agents::player::Player;
 use nalgebra::Vector3;
 use sim::arena::Side;
 use sim::episode::Rally;
 use sim::events::ContactKind;
-use sim::predict::{self, BounceModel};
+use sim::predict;
 use sim::rng::Rng;
-use std::sync::Arc;
 
 type V3 = Vector3<f64>;
 
@@ -30,19 +30,12 @@ struct Ball {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let path = args.first().expect("checkpoint file");
-    let rallies: u32 = args.get(1).map(|s| s.parse().unwrap()).unwrap_or(100);
-    let seed: u64 = args.get(2).map(|s| s.parse().unwrap()).unwrap_or(4242);
-    let model = Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap());
-    let ck =
-        Arc::new(Checkpoint::from_json(&std::fs::read_to_string(path).unwrap(), &model).unwrap());
-    let preset = sim::arena::MYOCHALLENGE;
-    let bounce = BounceModel::for_table(&preset.table);
-    let config = sim::config::ArenaConfig::default();
-    let mut rally = Rally::new(model.clone(), &config, preset).unwrap();
-    let mut players = [
-        CheckpointPlayer::new(ck.clone(), &model, bounce, 0).unwrap(),
-        CheckpointPlayer::new(ck, &model, bounce, 0).unwrap(),
-    ];
+    let rallies: u32 = common::arg(&args, 1, 100);
+    let seed: u64 = common::arg(&args, 2, 4242);
+    let bench = common::Bench::load(path);
+    let (model, bounce) = (bench.model.clone(), bench.bounce);
+    let mut rally = Rally::new(model.clone(), &bench.config, bench.preset).unwrap();
+    let mut players = [bench.player(), bench.player()];
     println!("rally,index,spin_x,spin_y,spin_z,speed,cross_y,cross_z,bounce_err,pred_vx,pred_vz,real_vx,real_vz,returned");
     let mut ctrl = vec![0.0; model.actuators.len()];
     for k in 0..rallies {

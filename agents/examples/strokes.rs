@@ -1,15 +1,14 @@
 //! Where a checkpoint's strokes go wrong: for each single-serve episode, the planned outgoing ball
 //! velocity against the one the paddle produced, and the predicted landing of each. A diagnosis
 //! aid: `cargo run --release --example strokes -- CHECKPOINT [p2|rally] [episodes] [seed]`.
-use agents::checkpoint::{Checkpoint, CheckpointPlayer};
+mod common;
+
 use agents::player::Player;
 use nalgebra::Vector3;
-use sim::episode::SingleServe;
 use sim::events::ContactKind;
 use sim::predict::{self, BounceModel};
 use sim::rng::Rng;
 use sim::serve::ServeKind;
-use std::sync::Arc;
 
 fn landing(pos: &Vector3<f64>, vel: &Vector3<f64>, m: &BounceModel) -> Option<Vector3<f64>> {
     predict::next_bounce(pos, vel, m).map(|b| b.pos)
@@ -24,16 +23,13 @@ fn main() {
             server: sim::arena::Side::B,
         },
     };
-    let episodes: usize = args.get(2).map(|s| s.parse().unwrap()).unwrap_or(200);
-    let seed: u64 = args.get(3).map(|s| s.parse().unwrap()).unwrap_or(4242);
-    let model = Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap());
-    let ck =
-        Arc::new(Checkpoint::from_json(&std::fs::read_to_string(path).unwrap(), &model).unwrap());
-    let preset = sim::arena::MYOCHALLENGE;
-    let bounce = BounceModel::for_table(&preset.table);
-    let config = sim::config::ArenaConfig::default();
-    let mut env = SingleServe::new(model.clone(), &config, preset).unwrap();
-    let mut player = CheckpointPlayer::new(ck, &model, bounce, 0).unwrap();
+    let episodes: usize = common::arg(&args, 2, 200);
+    let seed: u64 = common::arg(&args, 3, 4242);
+    let bench = common::Bench::load(path);
+    let bounce = bench.bounce;
+    let mut env = bench.single();
+    let mut player = bench.player();
+    let model = bench.model.clone();
     println!("end,plan_vx,plan_vy,plan_vz,act_vx,act_vy,act_vz,plan_land_x,plan_land_y,act_land_x,act_land_y,pad_err_pos,pad_vx,pad_vy,pad_vz,rkt_vx,rkt_vy,rkt_vz");
     for i in 0..episodes {
         let (serve_seed, agent_seed) = agents::seeds::episode_seeds(seed, i);
@@ -42,18 +38,12 @@ fn main() {
         let mut ctrl = vec![0.0; model.actuators.len()];
         let mut row: Option<String> = None;
         loop {
-            ctrl.copy_from_slice(&env.robot.state.ctrl);
-            if player
-                .act(&env.robot, &env.world.ball, env.world.time, &mut ctrl)
-                .is_err()
-            {
-                env.invalid_action();
+            if !common::act(&mut player, &mut env, &mut ctrl) {
                 break;
             }
             let plan = player.command().map(|(p, _)| *p);
             let pad_v = env.robot.paddle.lin_vel;
             let pad_p = env.robot.paddle.pose.pos;
-            env.robot.state.ctrl.copy_from_slice(&ctrl);
             let rep = env.step();
             let hit = rep
                 .events
