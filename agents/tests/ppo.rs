@@ -335,3 +335,55 @@ fn validation_plays_and_keeps_the_policy_at_its_noise_scale() {
         "validation.noise_scale: out of range"
     );
 }
+
+#[test]
+fn the_bound_loss_pulls_pinned_means_back_towards_the_bound() {
+    // The rally built-in's source (runs/kmac-bank2/init) has means far past ±1 on several joints
+    // (their samples almost always clip, so the surrogate gives them no gradient). Four iterations
+    // with the bound loss (a fresh optimiser, as the rally fine-tunings start) bring them part of the
+    // way in; without it, they stay about where they were.
+    let run = RunDir::open(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../runs/kmac-bank2/init"
+    )))
+    .unwrap();
+    let mut cfg = TrainConfig::default();
+    cfg.ppo.envs = 8;
+    cfg.ppo.steps_per_env = 32;
+    // Past the bound, at the normalised observation's mean (the zero vector).
+    let excess = |t: &Trainer| -> f32 {
+        let obs = candle_core::Tensor::zeros(
+            (1, t.obs_dim()),
+            candle_core::DType::F32,
+            &candle_core::Device::Cpu,
+        )
+        .unwrap();
+        let mu = t
+            .net
+            .mean(&obs)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        mu.iter().map(|m| (m.abs() - 1.0).max(0.0)).sum()
+    };
+    let after = |coef: f64| {
+        let mut c = cfg.clone();
+        c.ppo.bound_coef = coef;
+        let mut t = Trainer::new(model(), Method::Kmac, c, 5).unwrap();
+        run.warm_start(&mut t, WarmOptimiser::Fresh).unwrap();
+        let start = excess(&t);
+        for _ in 0..4 {
+            t.iterate().unwrap();
+        }
+        (start, excess(&t))
+    };
+    let ((start, plain), (_, bounded)) = (after(0.0), after(1.0));
+    eprintln!("summed excess past ±1: start {start:.3}, plain {plain:.3}, bound loss {bounded:.3}");
+    assert!(start > 1.0, "the start has pinned means: {start}");
+    assert!(bounded < 0.8 * start, "{bounded} vs {start}");
+    assert!(bounded < 0.8 * plain, "{bounded} vs {plain}");
+    cfg.ppo.bound_coef = -1.0;
+    assert_eq!(cfg.validate().unwrap_err(), "ppo.bound_coef: out of range");
+}
