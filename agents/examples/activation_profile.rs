@@ -1,6 +1,7 @@
 //! Where a checkpoint spends its activation in a single-serve episode: mean activation ‖a‖₁/n_a by
-//! time relative to the first paddle contact (episodes without one are left out), the share of the
-//! episode's activation spent before and after it, and how many muscles sit near full activation.
+//! time relative to the first paddle contact (episodes without one are left out; `rally eval`
+//! gives the split before and after it), how many muscles sit near full activation, and for K-MAC
+//! how often each action's mean sits at a clip bound and how far its target is from the joint.
 //! A diagnosis aid: `cargo run --release -p agents --example activation_profile -- CHECKPOINT
 //! [episodes] [seed]`.
 mod common;
@@ -27,10 +28,10 @@ fn main() {
     let na = muscles.len() as f64;
     let nb = (LAST - FIRST) as usize;
     let (mut sum, mut sat, mut cnt) = (vec![0.0; nb], vec![0.0; nb], vec![0usize; nb]);
-    let (mut before, mut after, mut all_l1, mut all_steps, mut hits) = (0.0, 0.0, 0.0, 0usize, 0);
+    let (mut all_l1, mut all_steps, mut hits) = (0.0, 0usize, 0);
     let mut per_muscle = vec![0.0; muscles.len()];
-    // Per action dimension: steps at a clip bound (|a| > 0.98) and the mean |target − position| in
-    // units of the action (half-ranges), K-MAC checkpoints only.
+    // Per action entry (K-MAC checkpoints only): steps whose mean action is at a clip bound
+    // (|a| > 0.98), how far past ±1 it lies, and |target − position| in half-ranges of its span.
     let space = agents::controller::ActionSpace::new(&model);
     let kmac = matches!(
         ck.controller,
@@ -53,19 +54,16 @@ fn main() {
             }
             if kmac {
                 nsteps += 1.0;
-                for (k, &m) in player.last_mean().iter().enumerate().take(nact) {
+                let mean = player.last_mean();
+                let targets = space.kmac_targets(&model, mean);
+                for (k, (&m, &z)) in mean.iter().zip(&targets).enumerate() {
                     beyond[k] += (m.abs() - 1.0).max(0.0);
-                    let a = m.clamp(-1.0, 1.0);
-                    let j = &model.joints[space.joints[k]];
-                    let [lo, hi] = j
-                        .range
-                        .unwrap_or([-std::f64::consts::PI, std::f64::consts::PI]);
-                    let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
-                    let pos = (env.robot.state.qpos[j.qpos_adr] - mid) / half;
-                    if a.abs() > 0.98 {
+                    if m.abs() > 0.98 {
                         clipped[k] += 1.0;
                     }
-                    gap[k] += (a * (1.0 + 2.0 * agents::controller::TARGET_MARGIN) - pos).abs();
+                    let [lo, hi] = space.kmac_target_range(&model, k);
+                    let q = env.robot.state.qpos[model.joints[space.joints[k]].qpos_adr];
+                    gap[k] += (z - q).abs() / (0.5 * (hi - lo));
                 }
             }
             let rep = env.step();
@@ -93,11 +91,6 @@ fn main() {
         let Some(th) = t_hit else { continue };
         hits += 1;
         for &(t, l1, s) in &trace {
-            if t <= th {
-                before += l1;
-            } else {
-                after += l1;
-            }
             let b = ((t - th) / BIN).floor() as i64;
             if (FIRST..LAST).contains(&b) {
                 let k = (b - FIRST) as usize;
@@ -111,11 +104,6 @@ fn main() {
         "{path}: {episodes} episodes (seed {seed}), {hits} with contact; mean activation over all steps {:.3}; steps per episode {:.1}",
         all_l1 / all_steps as f64,
         all_steps as f64 / episodes as f64
-    );
-    println!(
-        "share of the activation of hit episodes spent before contact {:.2}, after {:.2}",
-        before / (before + after),
-        after / (before + after)
     );
     println!("t_from_contact_s,mean_activation,muscles_above_0.9,steps");
     for k in 0..nb {

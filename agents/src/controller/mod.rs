@@ -237,6 +237,32 @@ fn servo_range(model: &Model, s: usize, j: usize) -> [f64; 2] {
         .unwrap_or_else(|| joint_range(model, j))
 }
 
+impl ActionSpace {
+    /// The range a K-MAC action entry `k` spans: the servo's control range for a servo joint, the
+    /// joint's range widened by [`TARGET_MARGIN`] otherwise.
+    pub fn kmac_target_range(&self, model: &Model, k: usize) -> [f64; 2] {
+        let j = self.joints[k];
+        match self.servos[k] {
+            Some(s) => servo_range(model, s, j),
+            None => target_range(model, j),
+        }
+    }
+
+    /// The joint targets a K-MAC action asks for, one per entry of `joints` (entries clipped to
+    /// [−1, 1]).
+    pub fn kmac_targets(&self, model: &Model, action: &[f64]) -> Vec<f64> {
+        action
+            .iter()
+            .take(self.joints.len())
+            .enumerate()
+            .map(|(k, &a)| {
+                let r = self.kmac_target_range(model, k);
+                scale(a, r[0], r[1])
+            })
+            .collect()
+    }
+}
+
 impl ActionMapper {
     /// The mapper for `spec` on `model`.
     pub fn new(model: &Model, spec: &ControllerSpec) -> ActionMapper {
@@ -294,20 +320,7 @@ impl ActionMapper {
         };
         match self {
             ActionMapper::Kmac(k) => {
-                let targets: Vec<f64> = k
-                    .space
-                    .joints
-                    .iter()
-                    .zip(&k.space.servos)
-                    .zip(action)
-                    .map(|((&j, servo), &a)| {
-                        let r = match servo {
-                            Some(s) => servo_range(model, *s, j),
-                            None => target_range(model, j),
-                        };
-                        scale(a, r[0], r[1])
-                    })
-                    .collect();
+                let targets = k.space.kmac_targets(model, action);
                 k.controls(model, state, &targets, dt, ctrl);
             }
             ActionMapper::MusclePd(m) => {
