@@ -2,6 +2,7 @@
 """Writes MuJoCo's view of a model to a JSON fixture, for muscle-rally's Rust tests to compare against.
 
     python tools/mujoco_crosscheck.py MODEL.xml OUT.json [--configs 24] [--seed 0] [--steps 250]
+        [--keyframe-config] [--no-contacts]
 
 For `--configs` joint configurations sampled within the joint limits (independent joints uniform in
 the middle 90% of their range, dependent joints set by their equality polynomials, free joints at a
@@ -13,7 +14,9 @@ controls drawn in --ctrl-range; from the first keyframe), each step's qpos,
 qvel and activation. Both motions must stay clear of the joint limits (where MuJoCo's constraint solver
 and ours differ by design): starting from that posture, the tool perturbs the start (and, for the
 actuated motion, redraws the controls) until the whole 0.5 s stays at least --clearance from every
-limit, and records the clearance it found. Needs `pip install mujoco numpy`.
+limit, and records the clearance it found. `--keyframe-config` records the first keyframe (with a random
+velocity) before the sampled configurations; `--no-contacts` turns MuJoCo's contacts off for the motions
+(muscle-rally does not simulate contacts between body parts). Needs `pip install mujoco numpy`.
 """
 import argparse
 import json
@@ -34,18 +37,24 @@ def dense_moment(m, d):
 
 
 def couplings(m):
-    """(dependent qpos adr, independent qpos adr, polycoef) for active joint equalities."""
+    """(dependent qpos adr, independent qpos adr or None for a locked joint, polycoef) for active
+    joint equalities."""
     out = []
     for i in range(m.neq):
         if m.eq_type[i] != mujoco.mjtEq.mjEQ_JOINT or not m.eq_active0[i]:
             continue
         j1, j2 = m.eq_obj1id[i], m.eq_obj2id[i]
-        out.append((m.jnt_qposadr[j1], m.jnt_qposadr[j2], m.eq_data[i][:5].copy()))
+        out.append((m.jnt_qposadr[j1], m.jnt_qposadr[j2] if j2 >= 0 else None, m.eq_data[i][:5].copy()))
     return out
 
 
 def apply_couplings(m, qpos, coup, qvel=None):
     for dep, ind, c in coup:
+        if ind is None:
+            qpos[dep] = m.qpos0[dep] + c[0]
+            if qvel is not None:
+                qvel[m.jnt_dofadr[list(m.jnt_qposadr).index(dep)]] = 0.0
+            continue
         x = qpos[ind] - m.qpos0[ind]
         qpos[dep] = m.qpos0[dep] + c[0] + c[1] * x + c[2] * x**2 + c[3] * x**3 + c[4] * x**4
         if qvel is not None:
@@ -75,6 +84,18 @@ def sample_config(m, rng, coup):
             qpos[adr] = rng.uniform(mid - half, mid + half)
         else:
             qpos[adr] = m.qpos0[adr] + rng.uniform(-1.0, 1.0)
+    apply_couplings(m, qpos, coup)
+    return qpos
+
+
+def mid_range(m, coup):
+    """qpos0 with every independent limited hinge or slide at the middle of its range."""
+    qpos = m.qpos0.copy()
+    dependents = {dep for dep, _, _ in coup}
+    for j in range(m.njnt):
+        adr = m.jnt_qposadr[j]
+        if m.jnt_limited[j] and adr not in dependents and m.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
+            qpos[adr] = 0.5 * (m.jnt_range[j][0] + m.jnt_range[j][1])
     apply_couplings(m, qpos, coup)
     return qpos
 
@@ -115,12 +136,20 @@ def motion(m, d, start_qpos, ctrl, steps, start_qvel=None):
             "ctrl": list(map(float, ctrl)), "qpos": qpos, "qvel": qvel, "act": act}
 
 
+def locked_joints(m):
+    """Joints an equality locks in place (joint1 without joint2): they never approach their limits."""
+    return {m.eq_obj1id[i] for i in range(m.neq)
+            if m.eq_type[i] == mujoco.mjtEq.mjEQ_JOINT and m.eq_active0[i] and m.eq_obj2id[i] < 0}
+
+
 def limit_clearance(m, qpos_rows):
-    """Smallest distance of any limited hinge/slide joint from its limits over a trajectory."""
+    """Smallest distance of any limited hinge/slide joint (locked ones aside) from its limits over a
+    trajectory."""
     worst = np.inf
     q = np.asarray(qpos_rows)
+    locked = locked_joints(m)
     for j in range(m.njnt):
-        if not m.jnt_limited[j] or m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+        if not m.jnt_limited[j] or m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE or j in locked:
             continue
         lo, hi = m.jnt_range[j]
         col = q[:, m.jnt_qposadr[j]]
@@ -164,17 +193,31 @@ def main():
     ap.add_argument("--ctrl-range", type=float, nargs=2, default=(0.05, 0.3), help="muscle controls of the actuated motion")
     ap.add_argument("--actuated-key", default=None, help="keyframe the actuated motion starts from (default: the first)")
     ap.add_argument("--quiet", default="", help="comma-separated muscles left at zero control in the actuated motion")
+    ap.add_argument("--keyframe-config", action="store_true", help="record the first keyframe before the sampled configurations")
+    ap.add_argument("--no-contacts", action="store_true", help="disable contacts (mjDSBL_CONTACT)")
+    ap.add_argument("--motion-start", choices=["key", "mid"], default="key",
+                    help="start the motions from the keyframes (default) or with every independent limited joint "
+                         "at the middle of its range")
     args = ap.parse_args()
 
     m = mujoco.MjModel.from_xml_path(args.model)
+    if args.no_contacts:
+        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     d = mujoco.MjData(m)
     rng = np.random.default_rng(args.seed)
     coup = couplings(m)
 
     configs = []
+    starts = []
+    if args.keyframe_config and m.nkey > 0:
+        q = m.key_qpos[0].copy()
+        apply_couplings(m, q, coup)
+        starts.append(q)
     for _ in range(args.configs):
+        starts.append(None)
+    for fixed in starts:
         mujoco.mj_resetData(m, d)
-        d.qpos[:] = sample_config(m, rng, coup)
+        d.qpos[:] = sample_config(m, rng, coup) if fixed is None else fixed
         # A velocity too, for actuator velocities and the Coriolis terms.
         qvel = rng.uniform(-1.0, 1.0, m.nv)
         apply_couplings(m, d.qpos.copy(), coup, qvel)
@@ -218,8 +261,13 @@ def main():
             sys.exit(f"no keyframe named {name}")
         return default
 
-    hang = key("hang", start)
-    act_start = key(args.actuated_key, start)
+    if args.motion_start == "mid":
+        start = mid_range(m, coup)
+        start_qvel = np.zeros(m.nv)
+        hang = act_start = start
+    else:
+        hang = key("hang", start)
+        act_start = key(args.actuated_key, start)
     motions = {
         "passive": clear_motion(m, d, hang, lambda s, a: servo_targets(s), args.steps, args.clearance, motion_rng, coup,
                                 start_qvel=start_qvel if hang is start else None),
@@ -239,6 +287,7 @@ def main():
         "body_inertia": m.body_inertia.tolist(),
         "body_ipos": m.body_ipos.tolist(),
         "actuator_lengthrange": m.actuator_lengthrange.tolist(),
+        "contacts": not args.no_contacts,
         "configs": configs,
         "motions": motions,
     }

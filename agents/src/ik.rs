@@ -62,7 +62,7 @@ impl PaddleIk {
             })
             .collect();
         // Slides (the pelvis) are cheap; hinges cost more; the torso costs most.
-        let torso = |j: usize| model.couplings.iter().any(|c| c.independent == j);
+        let torso = |j: usize| model.couplings.iter().any(|c| c.independent == Some(j));
         // Light distal joints (the wrist) are easily shaken by the grip and the swing: they move least.
         let distal = |j: usize| {
             let name = model.joints[j].name.as_str();
@@ -172,10 +172,13 @@ impl PaddleIk {
             for (c, &j) in self.joints.iter().enumerate() {
                 let joint = &model.joints[j];
                 let mut cols = vec![(joint.dof_adr, 1.0)];
-                for cp in model.couplings.iter().filter(|cp| cp.independent == j) {
-                    let dep = &model.joints[cp.dependent];
-                    let (_, d1, _) = cp.eval(q[joint.qpos_adr], joint.reference, dep.reference);
-                    cols.push((dep.dof_adr, d1));
+                for cp in model
+                    .couplings
+                    .iter()
+                    .filter(|cp| cp.independent == Some(j))
+                {
+                    let (_, d1, _) = cp.at(model, &q);
+                    cols.push((model.joints[cp.dependent].dof_adr, d1));
                 }
                 let mut jp = V3::zeros();
                 let mut jw = V3::zeros();

@@ -142,7 +142,9 @@ impl Data {
         let mut coupling_columns: Vec<Vec<(usize, f64)>> =
             independent_dofs.iter().map(|&d| vec![(d, 1.0)]).collect();
         for c in &model.couplings {
-            let ind = model.joints[c.independent].dof_adr;
+            // A locked joint is in no column: it never moves.
+            let Some(i) = c.independent else { continue };
+            let ind = model.joints[i].dof_adr;
             let r = independent_dofs
                 .iter()
                 .position(|&d| d == ind)
@@ -326,9 +328,10 @@ impl Data {
     pub fn update_couplings(&mut self, model: &Model, qpos: &[f64], qvel: &[f64]) {
         self.tdot_v.fill(0.0);
         for c in &model.couplings {
-            let ind = &model.joints[c.independent];
+            let Some(i) = c.independent else { continue };
+            let ind = &model.joints[i];
             let dep = &model.joints[c.dependent];
-            let (_, d1, d2) = c.eval(qpos[ind.qpos_adr], ind.reference, dep.reference);
+            let (_, d1, d2) = c.at(model, qpos);
             let r = self
                 .independent_dofs
                 .iter()
@@ -533,11 +536,13 @@ fn integrate_positions(model: &Model, state: &mut State, h: f64) {
 /// Dependent joints take their couplings' positions and velocities.
 pub fn set_dependents(model: &Model, state: &mut State) {
     for c in &model.couplings {
-        let ind = &model.joints[c.independent];
         let dep = &model.joints[c.dependent];
-        let (q, d1, _) = c.eval(state.qpos[ind.qpos_adr], ind.reference, dep.reference);
+        let (q, d1, _) = c.at(model, &state.qpos);
         state.qpos[dep.qpos_adr] = q;
-        state.qvel[dep.dof_adr] = d1 * state.qvel[ind.dof_adr];
+        state.qvel[dep.dof_adr] = match c.independent {
+            Some(i) => d1 * state.qvel[model.joints[i].dof_adr],
+            None => 0.0,
+        };
     }
 }
 

@@ -5,7 +5,8 @@
 
 use nalgebra::{DMatrix, Matrix3, Quaternion, UnitQuaternion, Vector3};
 
-use crate::model::{JointKind, Model, Transmission};
+use crate::model::{GeomKind, JointKind, Model, PathPoint, Transmission};
+use crate::wrap::{self, WrapShape};
 
 type V3 = Vector3<f64>;
 
@@ -166,18 +167,57 @@ pub fn dof_chain(model: &Model, last: &[Option<usize>], body: usize) -> Vec<usiz
     std::iter::successors(last[body], |&d| model.dof_parent[d]).collect()
 }
 
-/// One straight piece of a tendon's path, with the degrees of freedom that can change its length:
-/// those that move one end and not the other (a dof moving both ends moves the segment rigidly).
+/// The degrees of freedom that change the distance between a point on `b0` and a point on `b1`:
+/// those that move one body and not the other (a dof moving both moves the pair rigidly).
+#[derive(Debug, Clone, Default)]
+struct Link {
+    dofs0: Vec<usize>,
+    dofs1: Vec<usize>,
+    /// Both ends on one body: the piece never changes length.
+    rigid: bool,
+}
+
+impl Link {
+    fn new(model: &Model, last: &[Option<usize>], b0: usize, b1: usize) -> Link {
+        let c0 = dof_chain(model, last, b0);
+        let c1 = dof_chain(model, last, b1);
+        Link {
+            dofs0: c0.iter().copied().filter(|d| !c1.contains(d)).collect(),
+            dofs1: c1.iter().copied().filter(|d| !c0.contains(d)).collect(),
+            rigid: b0 == b1,
+        }
+    }
+}
+
+/// Where a wrap happens: the geom, its shape, radius and pose on its body, the side site.
 #[derive(Debug, Clone)]
-struct Segment {
+struct WrapGeom {
+    body: usize,
+    shape: WrapShape,
+    radius: f64,
+    pos: V3,
+    rot: Matrix3<f64>,
+    sidesite: Option<usize>,
+}
+
+/// One piece of a tendon's path: from a site to the next, straight or over a wrapping geom.
+#[derive(Debug, Clone)]
+struct Piece {
     tendon: usize,
     s0: usize,
     s1: usize,
-    dofs0: Vec<usize>,
-    dofs1: Vec<usize>,
+    /// The straight path `s0 → s1`.
+    direct: Link,
+    /// Over a geom: the geom, and the links `s0 → geom body` and `geom body → s1`.
+    wrap: Option<(WrapGeom, Link, Link)>,
 }
 
 /// Length of every tendon and its moment arms `∂l/∂q` per degree of freedom (MuJoCo's `ten_J`).
+///
+/// As MuJoCo's `mj_tendon`: each straight piece between consecutive points on different bodies
+/// adds `u·(J(p1) − J(p0))` with `u` its direction; wrap tangent points count as fixed to the
+/// geom's body and the arc between them adds length only (the tangent conditions make the arc's own
+/// derivative vanish).
 #[derive(Debug, Clone)]
 pub struct TendonKinematics {
     /// Lengths, m.
@@ -186,34 +226,72 @@ pub struct TendonKinematics {
     pub moment: DMatrix<f64>,
     /// For each tendon, the degrees of freedom where its moment arm can be non-zero.
     pub dofs: Vec<Vec<usize>>,
-    segments: Vec<Segment>,
+    pieces: Vec<Piece>,
+}
+
+/// One piece's path at a configuration: its points (site, site when straight; site, tangent,
+/// tangent, site over a geom) and its length.
+struct PiecePath {
+    points: [V3; 4],
+    length: f64,
 }
 
 impl TendonKinematics {
-    /// Zeroed storage for `model`, and each segment's degrees of freedom.
+    /// Zeroed storage for `model`, and each piece's degrees of freedom.
     pub fn new(model: &Model) -> TendonKinematics {
         let last = body_last_dofs(model);
-        let mut segments = Vec::new();
+        let mut pieces = Vec::new();
         let mut dofs = vec![Vec::new(); model.tendons.len()];
+        let site_body = |s: usize| model.sites[s].body;
         for (t, tendon) in model.tendons.iter().enumerate() {
-            for w in tendon.sites.windows(2) {
-                let (s0, s1) = (w[0], w[1]);
-                let c0 = dof_chain(model, &last, model.sites[s0].body);
-                let c1 = dof_chain(model, &last, model.sites[s1].body);
-                let dofs0: Vec<usize> = c0.iter().copied().filter(|d| !c1.contains(d)).collect();
-                let dofs1: Vec<usize> = c1.iter().copied().filter(|d| !c0.contains(d)).collect();
-                for d in dofs0.iter().chain(&dofs1) {
-                    if !dofs[t].contains(d) {
-                        dofs[t].push(*d);
+            let mut i = 0;
+            while i + 1 < tendon.path.len() {
+                let PathPoint::Site(s0) = tendon.path[i] else {
+                    unreachable!("the loader checks that a wrap sits between two sites")
+                };
+                let (wrap, s1, step) = match tendon.path[i + 1] {
+                    PathPoint::Site(s1) => (None, s1, 1),
+                    PathPoint::Wrap { geom, sidesite } => {
+                        let PathPoint::Site(s1) = tendon.path[i + 2] else {
+                            unreachable!("the loader checks that a wrap sits between two sites")
+                        };
+                        let g = &model.geoms[geom];
+                        let shape = match g.kind {
+                            GeomKind::Sphere => WrapShape::Sphere,
+                            GeomKind::Cylinder => WrapShape::Cylinder,
+                            k => unreachable!("the loader refuses wrapping over a {k:?}"),
+                        };
+                        let w = WrapGeom {
+                            body: g.body,
+                            shape,
+                            radius: g.size[0],
+                            pos: g.pos,
+                            rot: *g.quat.to_rotation_matrix().matrix(),
+                            sidesite,
+                        };
+                        let to = Link::new(model, &last, site_body(s0), g.body);
+                        let from = Link::new(model, &last, g.body, site_body(s1));
+                        (Some((w, to, from)), s1, 2)
+                    }
+                };
+                let direct = Link::new(model, &last, site_body(s0), site_body(s1));
+                let links =
+                    std::iter::once(&direct).chain(wrap.iter().flat_map(|(_, a, b)| [a, b]));
+                for l in links {
+                    for d in l.dofs0.iter().chain(&l.dofs1) {
+                        if !dofs[t].contains(d) {
+                            dofs[t].push(*d);
+                        }
                     }
                 }
-                segments.push(Segment {
+                pieces.push(Piece {
                     tendon: t,
                     s0,
                     s1,
-                    dofs0,
-                    dofs1,
+                    direct,
+                    wrap,
                 });
+                i += step;
             }
             dofs[t].sort_unstable();
         }
@@ -221,20 +299,49 @@ impl TendonKinematics {
             length: vec![0.0; model.tendons.len()],
             moment: DMatrix::zeros(model.tendons.len(), model.nv),
             dofs,
-            segments,
+            pieces,
         }
     }
 
-    /// Recomputes the lengths alone from the site positions in `kin` (the same sums as
+    /// A piece's path at the frames in `kin`.
+    fn path<'p>(
+        piece: &'p Piece,
+        kin: &Kinematics,
+    ) -> (PiecePath, Option<&'p (WrapGeom, Link, Link)>) {
+        let (p0, p1) = (kin.site_pos[piece.s0], kin.site_pos[piece.s1]);
+        if let Some(w) = &piece.wrap {
+            let g = &w.0;
+            let rot = kin.xrot[g.body] * g.rot;
+            let center = kin.xpos[g.body] + kin.xrot[g.body] * g.pos;
+            let side = g.sidesite.map(|s| kin.site_pos[s]);
+            if let Some(wr) = wrap::wrap(&p0, &p1, &center, &rot, g.radius, g.shape, side.as_ref())
+            {
+                let [t0, t1] = wr.points;
+                let length = (t0 - p0).norm() + wr.length + (p1 - t1).norm();
+                let path = PiecePath {
+                    points: [p0, t0, t1, p1],
+                    length,
+                };
+                return (path, Some(w));
+            }
+        }
+        let path = PiecePath {
+            points: [p0, p1, p1, p1],
+            length: (p1 - p0).norm(),
+        };
+        (path, None)
+    }
+
+    /// Recomputes the lengths alone from the frames in `kin` (the same sums as
     /// [`TendonKinematics::update`]; the moment arms are left as they were).
     pub fn update_lengths(&mut self, kin: &Kinematics) {
         self.length.fill(0.0);
-        for seg in &self.segments {
-            self.length[seg.tendon] += (kin.site_pos[seg.s1] - kin.site_pos[seg.s0]).norm();
+        for piece in &self.pieces {
+            self.length[piece.tendon] += Self::path(piece, kin).0.length;
         }
     }
 
-    /// Recomputes lengths and moment arms from the site positions in `kin`.
+    /// Recomputes lengths and moment arms from the frames in `kin`.
     pub fn update(&mut self, _model: &Model, kin: &Kinematics) {
         for (t, dofs) in self.dofs.iter().enumerate() {
             self.length[t] = 0.0;
@@ -242,20 +349,32 @@ impl TendonKinematics {
                 self.moment[(t, d)] = 0.0;
             }
         }
-        for seg in &self.segments {
-            let (p0, p1) = (kin.site_pos[seg.s0], kin.site_pos[seg.s1]);
-            let v = p1 - p0;
-            let l = v.norm();
-            self.length[seg.tendon] += l;
-            if l < 1e-12 {
-                continue;
-            }
-            let u = v / l;
-            for &d in &seg.dofs1 {
-                self.moment[(seg.tendon, d)] += u.dot(&kin.point_velocity(d, &p1));
-            }
-            for &d in &seg.dofs0 {
-                self.moment[(seg.tendon, d)] -= u.dot(&kin.point_velocity(d, &p0));
+        for piece in &self.pieces {
+            let (path, wrapped) = Self::path(piece, kin);
+            let t = piece.tendon;
+            self.length[t] += path.length;
+            let p = &path.points;
+            // The straight pieces: site → site, or site → tangent and tangent → site (the arc
+            // between the tangents lies on one body).
+            let straight = match wrapped {
+                None => [Some((&piece.direct, 0)), None],
+                Some((_, to, from)) => [Some((to, 0)), Some((from, 2))],
+            };
+            for (link, k) in straight.into_iter().flatten() {
+                if link.rigid {
+                    continue;
+                }
+                let (a, b) = (p[k], p[k + 1]);
+                // The piece's direction; (1, 0, 0) for a piece of no length, as MuJoCo.
+                let v = b - a;
+                let l = v.norm();
+                let u = if l < wrap::MINVAL { V3::x() } else { v / l };
+                for &d in &link.dofs1 {
+                    self.moment[(t, d)] += u.dot(&kin.point_velocity(d, &b));
+                }
+                for &d in &link.dofs0 {
+                    self.moment[(t, d)] -= u.dot(&kin.point_velocity(d, &a));
+                }
             }
         }
     }

@@ -38,6 +38,7 @@ pub mod robot;
 pub mod rules;
 pub mod serve;
 pub mod world;
+pub mod wrap;
 
 pub use arena::{Preset, Side};
 pub use ball::BallState;

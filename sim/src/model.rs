@@ -129,6 +129,8 @@ pub enum GeomKind {
     Cylinder,
     /// `size = [hx, hy, hz]`.
     Box,
+    /// `size = [a, b, c]`: the semi-axes along local x, y, z.
+    Ellipsoid,
     /// An infinite plane (world geoms only; no inertia).
     Plane,
 }
@@ -152,13 +154,41 @@ pub struct Geom {
     pub mass: f64,
 }
 
-/// A spatial tendon: a path through sites, its length the sum of the straight segments.
+/// One element of a spatial tendon's path (MuJoCo's `wrap_type`/`wrap_objid`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PathPoint {
+    /// The path passes through this site.
+    Site(usize),
+    /// Between the sites before and after it, the path wraps over this sphere or cylinder geom when
+    /// the straight line would cross it, on the side of `sidesite` when one is given (a sidesite
+    /// inside the geom makes the path pass through the geom's surface at one point: MuJoCo's inside
+    /// wrap).
+    Wrap {
+        /// The sphere or cylinder.
+        geom: usize,
+        /// The site that picks the side of the wrap.
+        sidesite: Option<usize>,
+    },
+}
+
+/// A spatial tendon: a path through sites, wrapping over spheres and cylinders between them; its
+/// length the sum of the straight segments and the arcs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Tendon {
     /// Name.
     pub name: String,
-    /// Sites along the path, origin first.
-    pub sites: Vec<usize>,
+    /// The path, origin first: it starts and ends at a site, and a wrap sits between two sites.
+    pub path: Vec<PathPoint>,
+}
+
+impl Tendon {
+    /// The sites of the path, in order (wraps left out).
+    pub fn sites(&self) -> impl Iterator<Item = usize> + '_ {
+        self.path.iter().filter_map(|p| match p {
+            PathPoint::Site(s) => Some(*s),
+            PathPoint::Wrap { .. } => None,
+        })
+    }
 }
 
 /// What an actuator pulls on.
@@ -231,13 +261,14 @@ impl Actuator {
 }
 
 /// An exact joint coupling (MuJoCo `<equality><joint polycoef>`): the dependent joint follows
-/// `q_dep = ref_dep + c0 + c1·Δ + c2·Δ² + c3·Δ³ + c4·Δ⁴`, `Δ = q_ind − ref_ind`.
+/// `q_dep = ref_dep + c0 + c1·Δ + c2·Δ² + c3·Δ³ + c4·Δ⁴`, `Δ = q_ind − ref_ind`; without an
+/// independent joint it is locked at `ref_dep + c0` (MuJoCo's `joint1` alone).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Coupling {
     /// The joint that follows.
     pub dependent: usize,
-    /// The joint it follows.
-    pub independent: usize,
+    /// The joint it follows; `None` locks the dependent joint.
+    pub independent: Option<usize>,
     /// Polynomial coefficients c0..c4.
     pub coef: [f64; 5],
 }
@@ -251,6 +282,19 @@ impl Coupling {
         let dq = c[1] + d * (2.0 * c[2] + d * (3.0 * c[3] + d * 4.0 * c[4]));
         let ddq = 2.0 * c[2] + d * (6.0 * c[3] + d * 12.0 * c[4]);
         (q, dq, ddq)
+    }
+
+    /// [`Coupling::eval`] on a model's `qpos`: the dependent's position and its first and second
+    /// derivatives by the independent joint (zero for a lock).
+    pub fn at(&self, model: &Model, qpos: &[f64]) -> (f64, f64, f64) {
+        let dep = &model.joints[self.dependent];
+        match self.independent {
+            Some(i) => {
+                let ind = &model.joints[i];
+                self.eval(qpos[ind.qpos_adr], ind.reference, dep.reference)
+            }
+            None => (dep.reference + self.coef[0], 0.0, 0.0),
+        }
     }
 }
 
@@ -342,10 +386,8 @@ impl Model {
     /// Applies every coupling to `qpos` in place: dependent joints take their polynomial's value.
     pub fn apply_couplings(&self, qpos: &mut [f64]) {
         for c in &self.couplings {
-            let ind = &self.joints[c.independent];
-            let dep = &self.joints[c.dependent];
-            let (q, _, _) = c.eval(qpos[ind.qpos_adr], ind.reference, dep.reference);
-            qpos[dep.qpos_adr] = q;
+            let (q, _, _) = c.at(self, qpos);
+            qpos[self.joints[c.dependent].qpos_adr] = q;
         }
     }
 }

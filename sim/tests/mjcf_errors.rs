@@ -55,9 +55,9 @@ fn unknown_elements_and_attributes_are_named() {
     assert!(e.message.contains("type=\"ball\""), "{e}");
     let e = err(&model(
         GOOD_BODY,
-        r#"<tendon><spatial name="t"><site site="s1"/><geom geom="g"/></spatial></tendon>"#,
+        r#"<tendon><spatial name="t"><site site="s1"/><pulley divisor="2"/><site site="s2"/></spatial></tendon>"#,
     ));
-    assert!(e.message.contains("wrapping"), "{e}");
+    assert!(e.message.contains("<pulley>"), "{e}");
     let e = err("<robot/>");
     assert!(e.message.contains("<mujoco>"), "{e}");
 }
@@ -228,4 +228,114 @@ fn defaults_and_childclass_apply_like_mujoco() {
     );
     // Sphere of radius 0.1 at density 1000.
     assert!((m.bodies[1].mass - 1000.0 * 4.0 / 3.0 * std::f64::consts::PI * 1e-3).abs() < 1e-9);
+}
+
+/// A wrapping body for the tendon tests: a sphere `ball`, a cylinder `drum`, a capsule `pill`, a side
+/// site on the same body and one on another.
+const WRAP_BODIES: &str = r#"<site name="w" pos="0 0 1.2"/><site name="far_side" pos="0 0.5 1.2"/>
+<body name="b" pos="0 0 1"><joint name="j" axis="0 1 0" range="-1 1"/>
+  <inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+  <geom name="ball" size="0.02"/><geom name="drum" type="cylinder" size="0.02 0.05"/>
+  <geom name="pill" type="capsule" size="0.02 0.05"/>
+  <site name="side" pos="0.05 0 0"/><site name="s2" pos="0 0.1 -0.1"/></body>"#;
+
+fn wrap_model(path: &str) -> String {
+    model(
+        WRAP_BODIES,
+        &format!(r#"<tendon><spatial name="t">{path}</spatial></tendon>"#),
+    )
+}
+
+#[test]
+fn malformed_wraps_are_refused_with_the_line() {
+    // The good case loads: a sphere and a cylinder between sites, with a side site.
+    let ok = wrap_model(
+        r#"<site site="w"/><geom geom="ball" sidesite="side"/><site site="s2"/><geom geom="drum"/><site site="w"/>"#,
+    );
+    mjcf::parse_str(&ok, "good.xml").expect("loads");
+    // Line 11 holds the <tendon>: paths are checked where they are written.
+    let cases = [
+        (
+            r#"<site site="w"/><geom geom="ball" sidesite="far_side"/><site site="s2"/>"#,
+            "a side site must move with its geom",
+        ),
+        (
+            r#"<site site="w"/><geom geom="pill"/><site site="s2"/>"#,
+            "capsule",
+        ),
+        (
+            r#"<site site="w"/><geom geom="nothing"/><site site="s2"/>"#,
+            "no geom named 'nothing'",
+        ),
+        (
+            r#"<site site="w"/><geom geom="ball"/>"#,
+            "starts and ends at a site",
+        ),
+        (
+            r#"<geom geom="ball"/><site site="s2"/>"#,
+            "starts and ends at a site",
+        ),
+        (
+            r#"<site site="w"/><geom geom="ball"/><geom geom="drum"/><site site="s2"/>"#,
+            "two wrapping geoms in a row",
+        ),
+        (
+            r#"<site site="w"/><geom geom="ball" sidesite="ghost"/><site site="s2"/>"#,
+            "no site named 'ghost'",
+        ),
+    ];
+    for (path, want) in cases {
+        let e = err(&wrap_model(path));
+        assert!(e.message.contains(want) && e.line == 11, "{path}: {e}");
+    }
+    // A zero-radius wrapping geom is refused where the geom is declared.
+    let zero = model(
+        r#"<body name="b"><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/><geom name="g" size="0"/></body>"#,
+        "",
+    );
+    let e = err(&zero);
+    assert!(e.message.contains("positive sizes") && e.line == 4, "{e}");
+}
+
+#[test]
+fn frames_place_their_children_and_refuse_joints() {
+    // A frame turned a quarter about z and shifted: the body inside sits where the frame puts it.
+    let m = mjcf::parse_str(
+        &model(
+            r#"<frame pos="1 0 0" euler="0 0 1.5707963267948966"><body name="b" pos="1 0 0">
+               <inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/><site name="s" pos="0 0 0"/></body></frame>"#,
+            "",
+        ),
+        "frame.xml",
+    )
+    .expect("loads");
+    let b = m.body("b").unwrap();
+    assert!((m.bodies[b].pos - nalgebra::Vector3::new(1.0, 1.0, 0.0)).norm() < 1e-12);
+    let e = err(&model(
+        r#"<body name="b"><frame><joint axis="0 1 0"/></frame><geom size="0.1"/></body>"#,
+        "",
+    ));
+    assert!(
+        e.message.contains("cannot be inside a <frame>") && e.line == 4,
+        "{e}"
+    );
+}
+
+#[test]
+fn a_lock_equality_holds_its_joint_at_the_offset() {
+    let m = mjcf::parse_str(
+        &model(
+            GOOD_BODY,
+            r#"<equality><joint joint1="j" polycoef="0.25 0 0 0 0"/></equality>"#,
+        ),
+        "lock.xml",
+    )
+    .expect("loads");
+    let state = sim::dynamics::State::new(&m);
+    assert_eq!(state.qpos[0], 0.25);
+    let e = err(&model(
+        GOOD_BODY,
+        r#"<equality><joint joint1="j" polycoef="0 1 0 0 0"/></equality>"#,
+    ));
+    assert!(e.message.contains("alone"), "{e}");
 }

@@ -287,13 +287,14 @@ async fn robot_model(State(s): State<AppState>) -> Json<Value> {
         sim::model::GeomKind::Capsule => "capsule",
         sim::model::GeomKind::Cylinder => "cylinder",
         sim::model::GeomKind::Box => "box",
+        sim::model::GeomKind::Ellipsoid => "ellipsoid",
         sim::model::GeomKind::Plane => "plane",
     };
     let muscles: Vec<Value> = m
         .muscles()
         .filter_map(|(a, act)| match act.transmission {
             sim::model::Transmission::Tendon(t) => {
-                Some(json!({"name": act.name, "actuator": a, "sites": m.tendons[t].sites}))
+                Some(json!({"name": act.name, "actuator": a, "sites": m.tendons[t].sites().collect::<Vec<_>>()}))
             }
             _ => None,
         })

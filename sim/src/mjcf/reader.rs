@@ -248,10 +248,17 @@ impl<'a> Attrs<'a> {
         }
     }
 
-    /// Up to N numbers; missing trailing entries keep `init`'s values (MuJoCo's rule for prm arrays).
+    /// Up to N numbers; missing trailing entries keep the values underneath (MuJoCo's rule for prm
+    /// arrays): `init`, overlaid by the default class's numbers, overlaid by the element's own.
     pub(crate) fn prefix<const N: usize>(&self, key: &str, init: [f64; N]) -> Result<[f64; N]> {
         let mut out = init;
-        if let Some(v) = self.nums(key)? {
+        let class = self.defaults.and_then(|d| d.get(key));
+        for text in class
+            .map(String::as_str)
+            .into_iter()
+            .chain(self.elem.attr(key))
+        {
+            let v = parse_numbers(self.elem, key, text)?;
             if v.len() > N {
                 return Err(self.elem.src.err(format!(
                     "<{}> {key}: at most {N} numbers, got {}",

@@ -1,4 +1,5 @@
-//! `<equality><joint polycoef>`: the joint couplings.
+//! `<equality><joint polycoef>`: the joint couplings (`joint1` follows `joint2`, or is locked when
+//! there is no `joint2`).
 
 use super::*;
 
@@ -35,8 +36,8 @@ impl Compiler {
                 Ok(id)
             };
             let dependent = find("joint1")?;
-            let independent = find("joint2")?;
-            if dependent == independent {
+            let independent = q.attr("joint2").map(|_| find("joint2")).transpose()?;
+            if independent == Some(dependent) {
                 return Err(q
                     .src
                     .err("<joint> equality: joint1 and joint2 are the same joint"));
@@ -48,6 +49,13 @@ impl Compiler {
                 coef,
             };
             let name = |j: usize| self.model.joints[j].name.clone();
+            if independent.is_none() && c.coef[1..].iter().any(|x| *x != 0.0) {
+                return Err(q.src.err(format!(
+                    "<joint> equality on '{}' alone: only polycoef's first number (the locked \
+                     offset) may be non-zero",
+                    name(dependent)
+                )));
+            }
             if self
                 .model
                 .couplings
@@ -63,11 +71,10 @@ impl Compiler {
                 .model
                 .couplings
                 .iter()
-                .any(|x| x.dependent == independent || x.independent == dependent)
+                .any(|x| Some(x.dependent) == independent || x.independent == Some(dependent))
             {
                 return Err(q.src.err(format!(
-                    "coupling chains are not supported: '{}' → '{}' links to another coupling; couple every dependent joint to an independent one",
-                    name(independent),
+                    "coupling chains are not supported: '{}' links to another coupling; couple every dependent joint to an independent one",
                     name(dependent)
                 )));
             }

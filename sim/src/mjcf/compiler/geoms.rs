@@ -3,7 +3,13 @@
 use super::*;
 
 impl Compiler {
-    pub(super) fn geom(&mut self, e: &Elem, body: usize, childclass: Option<&str>) -> Result<()> {
+    pub(super) fn geom(
+        &mut self,
+        e: &Elem,
+        body: usize,
+        childclass: Option<&str>,
+        frame: Frame,
+    ) -> Result<()> {
         e.check_attrs(&[
             "name",
             "class",
@@ -13,6 +19,8 @@ impl Compiler {
             "quat",
             "euler",
             "axisangle",
+            "xyaxes",
+            "zaxis",
             "fromto",
             "mass",
             "density",
@@ -29,15 +37,22 @@ impl Compiler {
             "priority",
         ])?;
         let a = self.attrs(e, "geom", childclass)?;
+        if a.raw("type") == Some("mesh") {
+            return Err(e.src.err(
+                "<geom type=\"mesh\">: meshes are not loaded; give the body an <inertial> and leave \
+                 the mesh out (`rally model import myosuite` writes MyoSuite's robot that way)",
+            ));
+        }
         let kind = match a.choice(
             "type",
-            &["sphere", "capsule", "cylinder", "box", "plane"],
+            &["sphere", "capsule", "cylinder", "box", "ellipsoid", "plane"],
             "sphere",
         )? {
             "sphere" => GeomKind::Sphere,
             "capsule" => GeomKind::Capsule,
             "cylinder" => GeomKind::Cylinder,
             "box" => GeomKind::Box,
+            "ellipsoid" => GeomKind::Ellipsoid,
             _ => GeomKind::Plane,
         };
         let mut size = [0.0; 3];
@@ -61,15 +76,14 @@ impl Compiler {
                 return Err(e.src.err("<geom> fromto: the two ends coincide"));
             }
             pos = 0.5 * (p0 + p1);
-            quat = UnitQuaternion::rotation_between(&V3::z(), &d).unwrap_or_else(|| {
-                UnitQuaternion::from_axis_angle(&V3::x_axis(), std::f64::consts::PI)
-            });
+            quat = z_to(&d);
             size[1] = 0.5 * d.norm();
         }
+        let (pos, quat) = frame.place(pos, quat);
         let needed = match kind {
             GeomKind::Sphere => 1,
             GeomKind::Capsule | GeomKind::Cylinder => 2,
-            GeomKind::Box => 3,
+            GeomKind::Box | GeomKind::Ellipsoid => 3,
             GeomKind::Plane => 0,
         };
         if size[..needed].iter().any(|s| *s <= 0.0) {
@@ -103,7 +117,13 @@ impl Compiler {
         Ok(())
     }
 
-    pub(super) fn site(&mut self, e: &Elem, body: usize, childclass: Option<&str>) -> Result<()> {
+    pub(super) fn site(
+        &mut self,
+        e: &Elem,
+        body: usize,
+        childclass: Option<&str>,
+        frame: Frame,
+    ) -> Result<()> {
         e.check_attrs(&[
             "name",
             "class",
@@ -113,6 +133,8 @@ impl Compiler {
             "quat",
             "euler",
             "axisangle",
+            "xyaxes",
+            "zaxis",
             "rgba",
             "group",
         ])?;
@@ -122,11 +144,11 @@ impl Compiler {
         if !name.is_empty() && self.model.sites.iter().any(|s| s.name == name) {
             return Err(e.src.err(format!("<site>: duplicate name '{name}'")));
         }
-        self.model.sites.push(Site {
-            name,
-            body,
-            pos: V3::from(a.arr::<3>("pos")?.unwrap_or([0.0; 3])),
-        });
+        let (pos, _) = frame.place(
+            V3::from(a.arr::<3>("pos")?.unwrap_or([0.0; 3])),
+            UnitQuaternion::identity(),
+        );
+        self.model.sites.push(Site { name, body, pos });
         Ok(())
     }
 }

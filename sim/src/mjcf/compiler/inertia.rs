@@ -67,6 +67,7 @@ pub(super) fn geom_volume(kind: GeomKind, s: &[f64; 3]) -> f64 {
         GeomKind::Capsule => PI * s[0] * s[0] * (2.0 * s[1]) + 4.0 / 3.0 * PI * s[0].powi(3),
         GeomKind::Cylinder => PI * s[0] * s[0] * 2.0 * s[1],
         GeomKind::Box => 8.0 * s[0] * s[1] * s[2],
+        GeomKind::Ellipsoid => 4.0 / 3.0 * PI * s[0] * s[1] * s[2],
         GeomKind::Plane => 0.0,
     }
 }
@@ -96,6 +97,11 @@ pub(super) fn geom_inertia(g: &Geom) -> V3 {
             m * (s[1] * s[1] + s[2] * s[2]) / 3.0,
             m * (s[0] * s[0] + s[2] * s[2]) / 3.0,
             m * (s[0] * s[0] + s[1] * s[1]) / 3.0,
+        ),
+        GeomKind::Ellipsoid => V3::new(
+            0.2 * m * (s[1] * s[1] + s[2] * s[2]),
+            0.2 * m * (s[0] * s[0] + s[2] * s[2]),
+            0.2 * m * (s[0] * s[0] + s[1] * s[1]),
         ),
         GeomKind::Plane => V3::zeros(),
     }

@@ -34,6 +34,39 @@ fn quat_wxyz(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
 
+/// The minimal rotation taking local z onto `v` (MuJoCo's `zaxis` and `fromto`); a half turn about
+/// x when `v` points along −z.
+fn z_to(v: &V3) -> UnitQuaternion<f64> {
+    UnitQuaternion::rotation_between(&V3::z(), v)
+        .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&V3::x_axis(), std::f64::consts::PI))
+}
+
+/// Where a `<frame>` places the elements inside it, in the frame of the body that holds them;
+/// `None` outside any frame (poses are then taken exactly as written). Frames nest: an inner
+/// frame is placed by the outer one.
+#[derive(Debug, Clone, Copy)]
+struct Frame(Option<(V3, UnitQuaternion<f64>)>);
+
+impl Frame {
+    const IDENTITY: Frame = Frame(None);
+
+    /// A pose given inside this frame, in the body's frame.
+    fn place(&self, pos: V3, quat: UnitQuaternion<f64>) -> (V3, UnitQuaternion<f64>) {
+        match self.0 {
+            Some((fpos, fquat)) => (fpos + fquat * pos, fquat * quat),
+            None => (pos, quat),
+        }
+    }
+}
+
+/// An element met while walking a body's children through its frames: the element, the frame it
+/// sits in and the default class its kind falls back to.
+struct Placed<'e> {
+    elem: &'e Elem,
+    frame: Frame,
+    childclass: Option<&'e str>,
+}
+
 impl Compiler {
     fn attrs<'a>(
         &'a self,
@@ -62,9 +95,10 @@ impl Compiler {
         }
     }
 
-    /// Orientation from `quat`, `euler` (intrinsic xyz) or `axisangle`; identity if none.
+    /// Orientation from `quat`, `euler` (intrinsic xyz), `axisangle`, `xyaxes` or `zaxis`; identity
+    /// if none.
     fn orientation(&self, a: &Attrs) -> Result<UnitQuaternion<f64>> {
-        let given: Vec<&str> = ["quat", "euler", "axisangle"]
+        let given: Vec<&str> = ["quat", "euler", "axisangle", "xyaxes", "zaxis"]
             .into_iter()
             .filter(|k| a.raw(k).is_some())
             .collect();
@@ -104,31 +138,132 @@ impl Compiler {
                 axis / n * self.angle(aa[3]),
             ));
         }
+        if let Some(z) = a.arr::<3>("zaxis")? {
+            let z = V3::from(z);
+            if z.norm() < 1e-12 {
+                return Err(a
+                    .elem
+                    .src
+                    .err(format!("<{}> zaxis: zero vector", a.elem.name)));
+            }
+            return Ok(z_to(&z));
+        }
+        if let Some(xy) = a.arr::<6>("xyaxes")? {
+            // MuJoCo: x normalised, y made orthogonal to it and normalised, z = x × y.
+            let x = V3::new(xy[0], xy[1], xy[2]);
+            let y = V3::new(xy[3], xy[4], xy[5]);
+            let bad = || {
+                a.elem.src.err(format!(
+                    "<{}> xyaxes: the two axes must be non-zero and not parallel",
+                    a.elem.name
+                ))
+            };
+            let x = x.try_normalize(1e-12).ok_or_else(bad)?;
+            let y = (y - x * x.dot(&y)).try_normalize(1e-12).ok_or_else(bad)?;
+            let m = Matrix3::from_columns(&[x, y, x.cross(&y)]);
+            return Ok(UnitQuaternion::from_rotation_matrix(
+                &nalgebra::Rotation3::from_matrix_unchecked(m),
+            ));
+        }
         Ok(UnitQuaternion::identity())
     }
 
-    fn body(&mut self, e: &Elem, parent: usize, childclass: Option<&str>) -> Result<()> {
-        e.check_attrs(&["name", "pos", "quat", "euler", "axisangle", "childclass"])?;
+    /// The `childclass` an element gives its children (checked to exist), else the inherited one.
+    fn childclass<'e>(&self, e: &'e Elem, inherited: Option<&'e str>) -> Result<Option<&'e str>> {
+        if let Some(c) = e.attr("childclass") {
+            if c != "main" && !self.defaults.contains_key(c) {
+                return Err(e.src.err(format!("<{}>: unknown childclass '{c}'", e.name)));
+            }
+        }
+        Ok(e.attr("childclass").or(inherited))
+    }
+
+    /// The children of a body (or of the world) with the `<frame>`s between them unwrapped, in
+    /// document order.
+    fn unwrap_frames<'e>(
+        &self,
+        children: &'e [Elem],
+        frame: Frame,
+        childclass: Option<&'e str>,
+        out: &mut Vec<Placed<'e>>,
+    ) -> Result<()> {
+        for c in children {
+            if c.name != "frame" {
+                out.push(Placed {
+                    elem: c,
+                    frame,
+                    childclass,
+                });
+                continue;
+            }
+            c.check_attrs(&[
+                "name",
+                "pos",
+                "quat",
+                "euler",
+                "axisangle",
+                "xyaxes",
+                "zaxis",
+                "childclass",
+            ])?;
+            let a = Attrs {
+                elem: c,
+                defaults: None,
+            };
+            let (pos, quat) = frame.place(
+                V3::from(a.arr::<3>("pos")?.unwrap_or([0.0; 3])),
+                self.orientation(&a)?,
+            );
+            let inner = self.childclass(c, childclass)?;
+            for k in &c.children {
+                if matches!(k.name.as_str(), "joint" | "freejoint" | "inertial") {
+                    return Err(k.src.err(format!(
+                        "<{}> cannot be inside a <frame>: it belongs to its body",
+                        k.name
+                    )));
+                }
+            }
+            self.unwrap_frames(&c.children, Frame(Some((pos, quat))), inner, out)?;
+        }
+        Ok(())
+    }
+
+    fn body(
+        &mut self,
+        e: &Elem,
+        parent: usize,
+        childclass: Option<&str>,
+        frame: Frame,
+    ) -> Result<()> {
+        e.check_attrs(&[
+            "name",
+            "pos",
+            "quat",
+            "euler",
+            "axisangle",
+            "xyaxes",
+            "zaxis",
+            "childclass",
+        ])?;
         let a = Attrs {
             elem: e,
             defaults: None,
         };
-        let childclass = e.attr("childclass").or(childclass);
-        if let Some(c) = e.attr("childclass") {
-            if c != "main" && !self.defaults.contains_key(c) {
-                return Err(e.src.err(format!("<body>: unknown childclass '{c}'")));
-            }
-        }
+        let childclass = self.childclass(e, childclass)?;
         let id = self.model.bodies.len();
         let name = e.attr("name").unwrap_or("").to_string();
         if !name.is_empty() && self.model.bodies.iter().any(|b| b.name == name) {
             return Err(e.src.err(format!("<body>: duplicate name '{name}'")));
         }
+        let (pos, quat) = frame.place(
+            V3::from(a.arr::<3>("pos")?.unwrap_or([0.0; 3])),
+            self.orientation(&a)?,
+        );
         self.model.bodies.push(Body {
             name,
             parent: Some(parent),
-            pos: V3::from(a.arr::<3>("pos")?.unwrap_or([0.0; 3])),
-            quat: self.orientation(&a)?,
+            pos,
+            quat,
             mass: 0.0,
             com: V3::zeros(),
             inertia: Matrix3::zeros(),
@@ -137,20 +272,22 @@ impl Compiler {
             source: format!("{}:{}", e.src.file, e.src.line),
         });
         self.body_has_inertial.push(false);
-        let mut children = Vec::new();
-        for c in &e.children {
+        let mut placed = Vec::new();
+        self.unwrap_frames(&e.children, Frame::IDENTITY, childclass, &mut placed)?;
+        for p in &placed {
+            let (c, cc) = (p.elem, p.childclass);
             match c.name.as_str() {
                 "inertial" => self.inertial(c, id)?,
-                "joint" => self.joint(c, id, childclass, false)?,
-                "freejoint" => self.joint(c, id, childclass, true)?,
-                "geom" => self.geom(c, id, childclass)?,
-                "site" => self.site(c, id, childclass)?,
-                "body" => children.push(c),
+                "joint" => self.joint(c, id, cc, false)?,
+                "freejoint" => self.joint(c, id, cc, true)?,
+                "geom" => self.geom(c, id, cc, p.frame)?,
+                "site" => self.site(c, id, cc, p.frame)?,
+                "body" => {}
                 _ => return Err(c.unsupported("body")),
             }
         }
-        for c in children {
-            self.body(c, id, childclass)?;
+        for p in placed.iter().filter(|p| p.elem.name == "body") {
+            self.body(p.elem, id, p.childclass, p.frame)?;
         }
         Ok(())
     }
@@ -167,22 +304,35 @@ impl Compiler {
                 body.com = com;
                 body.inertia = inertia;
             }
+        }
+        for b in 1..self.model.bodies.len() {
             let body = &self.model.bodies[b];
-            if body.joint_count > 0 {
-                let eig = SymmetricEigen::new(body.inertia).eigenvalues;
-                if body.mass <= 0.0 || eig.iter().any(|x| *x <= 0.0) {
-                    return Err(MjcfError {
+            if body.joint_count > 0 && !self.carries_mass(b) {
+                return Err(MjcfError {
                         file: body.source.rsplit_once(':').map(|s| s.0).unwrap_or("").to_string(),
                         line: body.source.rsplit_once(':').and_then(|s| s.1.parse().ok()).unwrap_or(0),
                         message: format!(
-                            "body '{}' moves (it has joints) but its mass ({}) or inertia is not positive: give it an <inertial> or geoms",
-                            body.name, body.mass
+                            "body '{}' moves (it has joints) but neither it nor a body welded to it has a positive mass and inertia: give it an <inertial> or geoms",
+                            body.name
                         ),
                     });
-                }
             }
         }
         Ok(())
+    }
+
+    /// Whether body `b`, or a body welded to it (a descendant reached through bodies without
+    /// joints), has a positive mass and inertia: MuJoCo's condition for a moving body.
+    fn carries_mass(&self, b: usize) -> bool {
+        let body = &self.model.bodies[b];
+        let eig = SymmetricEigen::new(body.inertia).eigenvalues;
+        if body.mass >= 1e-15 && eig.iter().all(|x| *x >= 1e-15) {
+            return true;
+        }
+        (b + 1..self.model.bodies.len()).any(|c| {
+            let child = &self.model.bodies[c];
+            child.parent == Some(b) && child.joint_count == 0 && self.carries_mass(c)
+        })
     }
 
     fn finish_dofs(&mut self) {
@@ -312,16 +462,18 @@ pub(super) fn compile(root: &Elem) -> Result<Model> {
     for e in root.children.iter().filter(|e| e.name == "worldbody") {
         e.check_attrs(&[])?;
         // As MuJoCo orders them: the world's own geoms and sites first, then the bodies.
-        for child in &e.children {
-            match child.name.as_str() {
+        let mut placed = Vec::new();
+        c.unwrap_frames(&e.children, Frame::IDENTITY, None, &mut placed)?;
+        for p in &placed {
+            match p.elem.name.as_str() {
                 "body" => {}
-                "geom" => c.geom(child, 0, None)?,
-                "site" => c.site(child, 0, None)?,
-                _ => return Err(child.unsupported("worldbody")),
+                "geom" => c.geom(p.elem, 0, p.childclass, p.frame)?,
+                "site" => c.site(p.elem, 0, p.childclass, p.frame)?,
+                _ => return Err(p.elem.unsupported("worldbody")),
             }
         }
-        for child in e.children.iter().filter(|c| c.name == "body") {
-            c.body(child, 0, None)?;
+        for p in placed.iter().filter(|p| p.elem.name == "body") {
+            c.body(p.elem, 0, p.childclass, p.frame)?;
         }
     }
     c.finish_inertia()?;

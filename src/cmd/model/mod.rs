@@ -1,5 +1,7 @@
 //! `rally model`: look inside an MJCF model — its structure (`inspect`) and its muscle geometry at a
-//! configuration (`kinematics`).
+//! configuration (`kinematics`) — and bring in MyoSuite's MyoChallenge robot (`import`).
+
+pub mod import;
 
 use std::path::{Path, PathBuf};
 
@@ -21,8 +23,9 @@ pub struct ModelArgs {
 enum ModelCommand {
     /// Bodies, joints, degrees of freedom, muscles, actuators and couplings of a model.
     Inspect {
-        /// MJCF model file (e.g. config/models/upper_body.xml).
-        model: PathBuf,
+        /// An MJCF file, `default` (the built-in 75-muscle body) or `myochallenge` (MyoSuite's
+        /// 273-muscle robot, after `rally model import myosuite`).
+        model: String,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -35,8 +38,8 @@ enum ModelCommand {
                       dependent (coupled) joints are replaced by their couplings."
     )]
     Kinematics {
-        /// MJCF model file.
-        model: PathBuf,
+        /// An MJCF file, `default` or `myochallenge` (see `rally model inspect --help`).
+        model: String,
         /// MuJoCo's qpos: every joint in model order (7 numbers for a free joint), comma-separated.
         #[arg(long, value_name = "Q1,Q2,…", allow_hyphen_values = true)]
         qpos: Option<String>,
@@ -44,6 +47,38 @@ enum ModelCommand {
         #[arg(long, value_name = "FILE")]
         qpos_file: Option<PathBuf>,
     },
+    /// Import MyoSuite's MyoChallenge 2025 table-tennis robot (273 muscles) as a model file.
+    Import(import::ImportArgs),
+}
+
+/// Where muscle-rally keeps what it fetches or builds at set-up (imported models, their Python
+/// environment): `$RALLY_DATA_DIR`, else `data/` in the working directory.
+pub fn data_dir() -> PathBuf {
+    std::env::var_os("RALLY_DATA_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("data"))
+}
+
+/// A MODEL argument: `default`, `myochallenge`, or a file. Returns the model and what to call it.
+pub fn resolve_model(arg: &str) -> Result<(Model, PathBuf), CliError> {
+    match arg {
+        "default" => Ok((
+            (*super::default_model()?).clone(),
+            PathBuf::from("config/models/upper_body.xml"),
+        )),
+        "myochallenge" => {
+            let path = data_dir().join(import::MYOCHALLENGE_FILE);
+            if !path.exists() {
+                return Err(CliError::Usage(format!(
+                    "no MyoChallenge model at {}: run `rally model import myosuite` first \
+                     (or set RALLY_DATA_DIR to where it was imported)",
+                    path.display()
+                )));
+            }
+            Ok((load_model(&path)?, path))
+        }
+        file => Ok((load_model(Path::new(file))?, PathBuf::from(file))),
+    }
 }
 
 /// Loads a model from disk; a problem is a usage error naming the file and line.
@@ -56,14 +91,14 @@ pub fn load_model(path: &Path) -> Result<Model, CliError> {
 pub fn run(args: &ModelArgs) -> Result<(), CliError> {
     match &args.command {
         ModelCommand::Inspect { model, json } => {
-            let m = load_model(model)?;
+            let (m, model) = resolve_model(model)?;
             if *json {
                 println!(
                     "{}",
                     serde_json::to_string_pretty(&inspect_json(&m)).map_err(anyhow::Error::from)?
                 );
             } else {
-                print!("{}", inspect_text(&m, model));
+                print!("{}", inspect_text(&m, &model));
             }
             Ok(())
         }
@@ -72,7 +107,7 @@ pub fn run(args: &ModelArgs) -> Result<(), CliError> {
             qpos,
             qpos_file,
         } => {
-            let m = load_model(model)?;
+            let (m, _) = resolve_model(model)?;
             let (text, source) = match (qpos, qpos_file) {
                 (Some(q), _) => (q.clone(), "--qpos".to_string()),
                 (None, Some(f)) => (
@@ -88,6 +123,7 @@ pub fn run(args: &ModelArgs) -> Result<(), CliError> {
             println!("{}", kinematics_json(&m, &q));
             Ok(())
         }
+        ModelCommand::Import(args) => import::run(args),
     }
 }
 
@@ -203,7 +239,7 @@ fn inspect_json(m: &Model) -> Value {
         }).collect::<Vec<_>>(),
         "couplings": m.couplings.iter().map(|c| json!({
             "dependent": m.joints[c.dependent].name,
-            "independent": m.joints[c.independent].name,
+            "independent": c.independent.map(|i| m.joints[i].name.clone()),
             "polycoef": c.coef,
         })).collect::<Vec<_>>(),
         "keyframes": m.keyframes.iter().map(|k| k.name.clone()).collect::<Vec<_>>(),
@@ -250,7 +286,10 @@ fn inspect_text(m: &Model, path: &Path) -> String {
             .couplings
             .iter()
             .find(|c| c.dependent == j)
-            .map(|c| format!("follows {}", m.joints[c.independent].name))
+            .map(|c| match c.independent {
+                Some(i) => format!("follows {}", m.joints[i].name),
+                None => "locked".to_string(),
+            })
             .unwrap_or_default();
         let _ = writeln!(
             s,
