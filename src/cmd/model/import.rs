@@ -178,9 +178,16 @@ pub fn run(args: &ImportArgs) -> Result<(), CliError> {
         .out
         .clone()
         .unwrap_or_else(|| data.join(MYOCHALLENGE_FILE));
+    // Absolute paths: the script runs in the temporary directory.
+    let absolute = |p: &Path| {
+        std::path::absolute(p).map_err(|e| CliError::Usage(format!("{}: {e}", p.display())))
+    };
+    let out = absolute(&out)?;
     let python = match &args.python {
+        // A bare name is looked up on PATH; a path is made absolute.
+        Some(p) if p.components().count() > 1 => given_python(&absolute(p)?)?,
         Some(p) => given_python(p)?,
-        None => venv_python(&data.join("venv-myosuite"))?,
+        None => venv_python(&absolute(&data)?.join("venv-myosuite"))?,
     };
     let dir = out
         .parent()
@@ -204,9 +211,11 @@ pub fn run(args: &ImportArgs) -> Result<(), CliError> {
         .with_context(|| format!("cannot write {}", script_path.display()))?;
 
     let bar = spinner("MyoSuite builds the challenge's model; checking it against MuJoCo");
+    // In the temporary directory: MuJoCo writes its MUJOCO_LOG.TXT where it runs.
     let run = Command::new(&python)
         .arg(script_path)
         .arg(&partial_path)
+        .current_dir(std::env::temp_dir())
         .output();
     bar.finish_and_clear();
     let run = run.with_context(|| format!("cannot run {}", python.display()))?;
