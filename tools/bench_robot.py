@@ -6,6 +6,9 @@
     (sim/tests/fixtures/myosuite_tt_ball_only.xml) with MjSpec, the second turned 180 degrees about
     (0, 0.04), and the ball in flight.
 Prints one JSON object: {"single_steps_per_second", "dual_steps_per_second", "mujoco_version"}.
+With `--model FILE` (e.g. the MyoChallenge robot `rally model import myosuite` wrote) it times that file
+alone, from its "ready" keyframe or else its first, muscles at 0.1, position servos holding their joint's
+keyframe position, and prints no dual rate (`rally bench` compares the dual arena with two of these steps).
 Needs `pip install mujoco numpy`.
 """
 import argparse
@@ -63,10 +66,40 @@ def rate(m, robots, seconds):
     return steps / (time.perf_counter() - start)
 
 
+def model_rate(path, seconds):
+    """One model from its keyframe: muscles at 0.1, servos holding their joint's keyframe position."""
+    m = mujoco.MjModel.from_xml_path(path)
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_KEY, k) for k in range(m.nkey)]
+    key = names.index("ready") if "ready" in names else 0
+    d = mujoco.MjData(m)
+    steps = 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        mujoco.mj_resetDataKeyframe(m, d, key)
+        for i in range(m.nu):
+            if m.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_MUSCLE:
+                d.ctrl[i] = 0.1
+            else:
+                q = d.qpos[m.jnt_qposadr[m.actuator_trnid[i][0]]]
+                lo, hi = m.actuator_ctrlrange[i] if m.actuator_ctrllimited[i] else (-np.inf, np.inf)
+                d.ctrl[i] = min(max(q, lo), hi)
+        d.act[:] = 0.1
+        mujoco.mj_step(m, d, nstep=NSTEP)
+        steps += NSTEP
+    return steps / (time.perf_counter() - start)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=3.0)
+    ap.add_argument("--model", help="time this MJCF file alone")
     args = ap.parse_args()
+    if args.model:
+        print(json.dumps({
+            "single_steps_per_second": model_rate(args.model, args.seconds),
+            "mujoco_version": mujoco.__version__,
+        }))
+        return
     single = mujoco.MjModel.from_xml_path(ROBOT)
     dual = dual_model()
     print(json.dumps({

@@ -16,7 +16,8 @@ myosuite 3.0.0; run by hand it does the same. Steps:
    parts; MuJoCo's default collision filter stays in the file).
 4. The paddle, a free body in MyoSuite held by finger contacts, becomes a body welded to the palm
    (`capitate_r`) at the pose it has relative to the palm in MyoSuite's keyframe: muscle-rally's grip
-   holds it. Its mass, blade (`pad`) and handle stay as MyoSuite has them.
+   holds it. Its mass, blade and handle stay as MyoSuite has them; the blade geom (`pad`) is named
+   `blade`, as muscle-rally's paddles name it.
 5. The keyframe keeps the robot's 58 joints.
 
 The result is checked with MuJoCo before it is written: every muscle's parameters and every tendon's
@@ -158,6 +159,10 @@ def weld_paddle(root, ref):
     rel_quat /= np.linalg.norm(rel_quat)
     for j in paddle.findall("joint") + paddle.findall("freejoint"):
         paddle.remove(j)
+    blade = paddle.find("geom[@name='pad']")
+    if blade is None:
+        fail(f"the paddle has no geom 'pad'")
+    blade.set("name", "blade")
     paddle.set("pos", nums(rel_pos))
     paddle.set("quat", nums(rel_quat))
     worldbody.remove(paddle)
@@ -233,8 +238,9 @@ def main():
         "  derived work under the same licence.\n"
         "  Changes from MyoSuite's file: geom-derived inertias written as <inertial> ("
         f"{', '.join(baked)}); assets, mesh geoms, materials, cameras, lights, sensors, <size>, <contact>,\n"
-        "  scenery, table and ball removed; the paddle welded to capitate_r at its keyframe pose; the\n"
-        f"  keyframe cut to the robot's {nq_robot} qpos. Muscles, tendons, joints and equalities are MyoSuite's.\n"
+        "  scenery, table and ball removed; the paddle welded to capitate_r at its keyframe pose (its\n"
+        f"  geom 'pad' named 'blade'); the keyframe cut to the robot's {nq_robot} qpos. Muscles, tendons,\n"
+        "  joints and equalities are MyoSuite's.\n"
         "-->\n"
     )
     out_path.write_text(header + body + "\n", encoding="utf-8")

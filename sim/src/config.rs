@@ -6,6 +6,8 @@ use serde::Deserialize;
 
 /// The shipped `config/arena.toml`.
 pub const DEFAULT_ARENA_TOML: &str = include_str!("../../config/arena.toml");
+/// The arena configuration for MyoSuite's MyoChallenge robot, `config/myochallenge.toml`.
+pub const MYOCHALLENGE_ARENA_TOML: &str = include_str!("../../config/myochallenge.toml");
 /// The shipped robot, `config/models/upper_body.xml`.
 pub const DEFAULT_MODEL_XML: &str = include_str!("../../config/models/upper_body.xml");
 
@@ -99,6 +101,14 @@ impl ArenaConfig {
     }
 }
 
+impl ArenaConfig {
+    /// The configuration for MyoSuite's MyoChallenge robot (`config/myochallenge.toml`).
+    pub fn myochallenge() -> ArenaConfig {
+        ArenaConfig::from_toml(MYOCHALLENGE_ARENA_TOML)
+            .expect("the shipped config/myochallenge.toml is valid")
+    }
+}
+
 impl Default for ArenaConfig {
     fn default() -> Self {
         ArenaConfig::from_toml(DEFAULT_ARENA_TOML).expect("the shipped config/arena.toml is valid")
@@ -113,6 +123,7 @@ mod tests {
     fn shipped_config_parses_and_bad_values_are_named() {
         let c = ArenaConfig::default();
         assert_eq!(c.grip.muscles, ["FDS", "FDP", "FPL"]);
+        assert_eq!(ArenaConfig::myochallenge().grip.hand_body, "capitate_r");
         let bad = DEFAULT_ARENA_TOML.replace("drop_distance = 0.10", "drop_distance = -1");
         assert!(ArenaConfig::from_toml(&bad)
             .unwrap_err()

@@ -1,7 +1,7 @@
 //! `rally bench`: how fast the simulator runs, next to MuJoCo on the same work measured in the same
 //! run (through `tools/bench_ball.py`), reported as a ratio.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -19,6 +19,7 @@ use sim::{BallWorld, Paddle};
 
 use super::{parse_seconds, CliError};
 
+mod robot;
 mod scale;
 
 /// What to measure.
@@ -27,8 +28,10 @@ pub enum Target {
     /// Ball-world physics steps per second, single thread: ball, table, net and one moving paddle,
     /// P2 serves of 300 control steps each.
     Ball,
-    /// Musculoskeletal physics steps per second, single thread: one robot (dynamics, 75 muscles,
-    /// grip), and the dual arena (two robots and the ball), from "ready" with every muscle at 0.1.
+    /// Musculoskeletal physics steps per second, single thread: one robot (dynamics, muscles,
+    /// grip), and the dual arena (two robots and the ball), from the "ready" keyframe (else the
+    /// model's first) with every muscle at 0.1 and the servos holding still; the split of our step
+    /// by stage. `--model myochallenge` measures MyoSuite's robot.
     Robot,
     /// Evaluation episodes and match rallies per second per core, with the scripted agent.
     Agents,
@@ -67,6 +70,10 @@ pub struct BenchArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
+    /// `robot` only: the model — `default` (the built-in 75-muscle body), `myochallenge`
+    /// (MyoSuite's robot, after `rally model import myosuite`) or an MJCF file.
+    #[arg(long, default_value = "default")]
+    model: String,
     /// Concurrent keep-alive clients (`server` only).
     #[arg(long, default_value = "8", value_parser = clap::value_parser!(u16).range(1..=256))]
     clients: u16,
@@ -109,9 +116,6 @@ pub fn ball_steps_per_second(seconds: f64) -> (f64, u64) {
     (steps as f64 / start.elapsed().as_secs_f64(), steps)
 }
 
-/// Physics steps of a robot between resets, as `tools/bench_robot.py` does.
-const ROBOT_STEPS_PER_RESET: usize = 2000;
-
 fn robot_model() -> anyhow::Result<std::sync::Arc<sim::model::Model>> {
     let model = sim::mjcf::parse_str(
         sim::config::DEFAULT_MODEL_XML,
@@ -120,66 +124,18 @@ fn robot_model() -> anyhow::Result<std::sync::Arc<sim::model::Model>> {
     Ok(std::sync::Arc::new(model))
 }
 
-/// Puts a robot at "ready" with every muscle's control and activation at 0.1.
-fn ready(robot: &mut sim::robot::Robot, model: &sim::model::Model) {
-    let key = model
-        .keyframes
-        .iter()
-        .find(|k| k.name == "ready")
-        .map(|k| k.qpos.clone());
-    robot.reset(key.as_deref());
-    for (i, a) in model.actuators.iter().enumerate() {
-        if a.muscle().is_some() {
-            robot.state.ctrl[i] = 0.1;
-            robot.state.act[i] = 0.1;
-        }
-    }
-}
-
-/// (one robot, dual arena) physics steps per second.
-pub fn robot_steps_per_second(seconds: f64) -> anyhow::Result<(f64, f64)> {
-    let model = robot_model()?;
-    let config = sim::config::ArenaConfig::default();
-    let budget = Duration::from_secs_f64(seconds);
-    let mut robot =
-        sim::robot::Robot::new(model.clone(), &config.grip, Side::A).map_err(anyhow::Error::msg)?;
-    let start = Instant::now();
-    let mut steps = 0usize;
-    while start.elapsed() < budget {
-        ready(&mut robot, &model);
-        for _ in 0..ROBOT_STEPS_PER_RESET {
-            robot.physics_step();
-        }
-        steps += ROBOT_STEPS_PER_RESET;
-    }
-    let single = steps as f64 / start.elapsed().as_secs_f64();
-
-    let ball = sim::BallState::new(Vector3::new(-1.2, -0.45, 1.45), Vector3::new(5.6, 1.6, 0.1));
-    let mut arena = sim::dual::DualArena::new(model.clone(), &config, MYOCHALLENGE, ball)
-        .map_err(anyhow::Error::msg)?;
-    let mut events = Vec::new();
-    let start = Instant::now();
-    let mut steps = 0usize;
-    while start.elapsed() < budget {
-        for r in arena.robots.iter_mut() {
-            ready(r, &model);
-        }
-        arena.world = BallWorld::new(MYOCHALLENGE, ball);
-        for _ in 0..ROBOT_STEPS_PER_RESET {
-            events.clear();
-            arena.physics_step(&mut events);
-        }
-        steps += ROBOT_STEPS_PER_RESET;
-    }
-    Ok((single, steps as f64 / start.elapsed().as_secs_f64()))
-}
-
-fn run_python(python: &PathBuf, script: &str, seconds: f64) -> anyhow::Result<serde_json::Value> {
+fn run_python(
+    python: &Path,
+    script: &str,
+    seconds: f64,
+    extra: &[String],
+) -> anyhow::Result<serde_json::Value> {
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(script);
     let out = Command::new(python)
         .arg(&script)
         .arg("--seconds")
         .arg(seconds.to_string())
+        .args(extra)
         .output()
         .with_context(|| format!("running {} {}", python.display(), script.display()))?;
     if !out.status.success() {
@@ -192,8 +148,8 @@ fn run_python(python: &PathBuf, script: &str, seconds: f64) -> anyhow::Result<se
     serde_json::from_slice(&out.stdout).context("reading the MuJoCo timing")
 }
 
-fn mujoco_steps_per_second(python: &PathBuf, seconds: f64) -> anyhow::Result<(f64, String)> {
-    let v = run_python(python, "tools/bench_ball.py", seconds)?;
+fn mujoco_steps_per_second(python: &Path, seconds: f64) -> anyhow::Result<(f64, String)> {
+    let v = run_python(python, "tools/bench_ball.py", seconds, &[])?;
     let rate = v["steps_per_second"]
         .as_f64()
         .ok_or_else(|| anyhow!("no steps_per_second in {v}"))?;
@@ -493,48 +449,15 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
             Ok(())
         }
         Target::Robot => {
-            let mujoco = if args.mujoco {
-                Some(run_python(
-                    &args.python,
-                    "tools/bench_robot.py",
-                    args.seconds,
-                )?)
-            } else {
-                None
-            };
-            let (single, dual) = robot_steps_per_second(args.seconds)?;
-            let mj = |key: &str| mujoco.as_ref().and_then(|m| m[key].as_f64());
-            let (mj_single, mj_dual) = (mj("single_steps_per_second"), mj("dual_steps_per_second"));
+            let r = robot::measure(
+                &args.model,
+                args.seconds,
+                args.mujoco.then_some(args.python.as_path()),
+            )?;
             if args.json {
-                println!(
-                    "{}",
-                    json!({
-                        "target": "robot",
-                        "single_steps_per_second": single,
-                        "dual_steps_per_second": dual,
-                        "mujoco_single_steps_per_second": mj_single,
-                        "mujoco_dual_steps_per_second": mj_dual,
-                        "mujoco_version": mujoco.as_ref().map(|m| m["mujoco_version"].clone()),
-                        "ratio_single": mj_single.map(|m| single / m),
-                        "ratio_dual": mj_dual.map(|m| dual / m),
-                    })
-                );
+                println!("{r}");
             } else {
-                println!("musculoskeletal robot (config/models/upper_body.xml: 25 DoF, 75 muscles), single thread:");
-                println!("  one robot     muscle-rally {single:>9.0} steps/s");
-                if let Some(m) = mj_single {
-                    println!(
-                        "                MuJoCo       {m:>9.0} steps/s   ratio {:.1}x",
-                        single / m
-                    );
-                }
-                println!("  dual arena    muscle-rally {dual:>9.0} steps/s");
-                if let Some(m) = mj_dual {
-                    println!(
-                        "                MuJoCo       {m:>9.0} steps/s   ratio {:.1}x",
-                        dual / m
-                    );
-                }
+                robot::print(&r);
             }
             Ok(())
         }
