@@ -22,6 +22,9 @@ use super::run_python;
 /// Physics steps of a robot between resets, as `tools/bench_robot.py` does.
 const STEPS_PER_RESET: usize = 2000;
 
+/// Passes over the recorded stretch per stage of the split.
+const SPLIT_REPEATS: usize = 7;
+
 /// The model to measure and its arena configuration: `default`, `myochallenge` or a file (with the
 /// default robot's grip settings).
 pub fn bench_model(arg: &str) -> Result<(Arc<Model>, ArenaConfig, PathBuf), CliError> {
@@ -84,12 +87,10 @@ fn rate<T>(
 
 /// Microseconds per robot step by stage, measured on the states of one recorded stretch: forward
 /// kinematics, tendons (paths, wrapping, moment arms), the rest of the dynamics (mass matrix, bias,
-/// muscles, couplings, limits, integration) and what the robot adds (grip and paddle).
-fn split(
-    model: &Arc<Model>,
-    config: &ArenaConfig,
-    seconds: f64,
-) -> anyhow::Result<serde_json::Value> {
+/// muscles, couplings, limits, integration) and what the robot adds (grip and paddle). Each stage's
+/// time is the fastest of [`SPLIT_REPEATS`] passes over the stretch (another process slows a pass;
+/// nothing makes one faster), and the stages are differences of nested timings.
+fn split(model: &Arc<Model>, config: &ArenaConfig) -> anyhow::Result<serde_json::Value> {
     let mut robot = Robot::new(model.clone(), &config.grip, Side::A).map_err(anyhow::Error::msg)?;
     ready(&mut robot, model);
     let mut states = Vec::with_capacity(STEPS_PER_RESET);
@@ -97,17 +98,16 @@ fn split(
         states.push(robot.state.clone());
         robot.physics_step();
     }
-    let budget = Duration::from_secs_f64(seconds / 4.0);
     let per_step = |f: &mut dyn FnMut(&State)| -> f64 {
-        let start = Instant::now();
-        let mut n = 0usize;
-        while start.elapsed() < budget {
-            for s in &states {
-                f(s);
-            }
-            n += states.len();
-        }
-        start.elapsed().as_secs_f64() * 1e6 / n as f64
+        (0..SPLIT_REPEATS)
+            .map(|_| {
+                let start = Instant::now();
+                for s in &states {
+                    f(s);
+                }
+                start.elapsed().as_secs_f64() * 1e6 / states.len() as f64
+            })
+            .fold(f64::INFINITY, f64::min)
     };
     let mut data = Data::new(model);
     let kinematics = per_step(&mut |s| data.kin.update(model, &s.qpos));
@@ -120,10 +120,17 @@ fn split(
         dynamics::step(model, &mut data, &mut s);
     }) - kinematics
         - tendons;
-    let whole = per_step(&mut |s| {
-        robot.state.clone_from(s);
-        robot.physics_step();
-    });
+    // The whole robot step on the same stretch, played from its start (the grip keeps state).
+    let whole = (0..SPLIT_REPEATS)
+        .map(|_| {
+            ready(&mut robot, model);
+            let start = Instant::now();
+            for _ in 0..STEPS_PER_RESET {
+                robot.physics_step();
+            }
+            start.elapsed().as_secs_f64() * 1e6 / STEPS_PER_RESET as f64
+        })
+        .fold(f64::INFINITY, f64::min);
     Ok(json!({
         "kinematics": kinematics,
         "tendons_and_wrapping": tendons,
@@ -180,7 +187,7 @@ pub fn measure(
             a.physics_step(&mut events);
         },
     );
-    let split = split(&model, &config, seconds)?;
+    let split = split(&model, &config)?;
     let mj = |key: &str| mujoco.as_ref().and_then(|m| m[key].as_f64());
     let mj_single = mj("single_steps_per_second");
     // The default robot's script composes a MuJoCo dual arena; for another model, an arena step is
