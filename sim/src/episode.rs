@@ -62,12 +62,14 @@ fn judge(
     }
 }
 
-/// The start pose of a robot: the model's "ready" keyframe if it has one.
+/// The start pose of a robot: the model's "ready" keyframe, else its first keyframe (MyoSuite's
+/// robot has one, "default"), else none (the reference configuration).
 pub fn ready_pose(model: &Model) -> Option<Vec<f64>> {
     model
         .keyframes
         .iter()
         .find(|k| k.name == "ready")
+        .or(model.keyframes.first())
         .map(|k| k.qpos.clone())
 }
 

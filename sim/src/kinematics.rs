@@ -169,7 +169,7 @@ pub fn dof_chain(model: &Model, last: &[Option<usize>], body: usize) -> Vec<usiz
 
 /// The degrees of freedom that change the distance between a point on `b0` and a point on `b1`:
 /// those that move one body and not the other (a dof moving both moves the pair rigidly).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 struct Link {
     dofs0: Vec<usize>,
     dofs1: Vec<usize>,

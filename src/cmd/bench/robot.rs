@@ -36,20 +36,10 @@ pub fn bench_model(arg: &str) -> Result<(Arc<Model>, ArenaConfig, PathBuf), CliE
     Ok((Arc::new(model), config, path))
 }
 
-/// The keyframe a benchmark starts from: "ready", else the model's first, else its reference pose.
-fn start_qpos(model: &Model) -> Option<Vec<f64>> {
-    model
-        .keyframes
-        .iter()
-        .find(|k| k.name == "ready")
-        .or(model.keyframes.first())
-        .map(|k| k.qpos.clone())
-}
-
 /// The start of every stretch: the keyframe, every muscle's control and activation at 0.1, every
 /// position servo holding its joint where the keyframe puts it (as `tools/bench_robot.py`).
 fn ready(robot: &mut Robot, model: &Model) {
-    robot.reset(start_qpos(model).as_deref());
+    robot.reset(sim::episode::ready_pose(model).as_deref());
     set_controls(model, &mut robot.state);
 }
 
