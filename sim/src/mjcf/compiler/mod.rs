@@ -41,6 +41,19 @@ fn z_to(v: &V3) -> UnitQuaternion<f64> {
         .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&V3::x_axis(), std::f64::consts::PI))
 }
 
+/// The attributes of a `<body>` and of a `<frame>`: a name, a placement and a default class for
+/// what is inside.
+const PLACED_ATTRS: [&str; 8] = [
+    "name",
+    "pos",
+    "quat",
+    "euler",
+    "axisangle",
+    "xyaxes",
+    "zaxis",
+    "childclass",
+];
+
 /// Where a `<frame>` places the elements inside it, in the frame of the body that holds them;
 /// `None` outside any frame (poses are then taken exactly as written). Frames nest: an inner
 /// frame is placed by the outer one.
@@ -196,16 +209,7 @@ impl Compiler {
                 });
                 continue;
             }
-            c.check_attrs(&[
-                "name",
-                "pos",
-                "quat",
-                "euler",
-                "axisangle",
-                "xyaxes",
-                "zaxis",
-                "childclass",
-            ])?;
+            c.check_attrs(&PLACED_ATTRS)?;
             let a = Attrs {
                 elem: c,
                 defaults: None,
@@ -235,16 +239,7 @@ impl Compiler {
         childclass: Option<&str>,
         frame: Frame,
     ) -> Result<()> {
-        e.check_attrs(&[
-            "name",
-            "pos",
-            "quat",
-            "euler",
-            "axisangle",
-            "xyaxes",
-            "zaxis",
-            "childclass",
-        ])?;
+        e.check_attrs(&PLACED_ATTRS)?;
         let a = Attrs {
             elem: e,
             defaults: None,
