@@ -168,3 +168,57 @@ fn scale_noise_writes_the_same_network_with_scaled_noise_and_records_it() {
     assert_eq!(over.status.code(), Some(2));
     assert_eq!(read(&half)["training"]["noise_scale"], 0.5 * base);
 }
+
+#[test]
+fn model_choices_that_cannot_play_are_refused_with_what_to_do() {
+    let empty = std::env::temp_dir().join(format!("rally-no-data-{}", std::process::id()));
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_rally"))
+            .args(args)
+            .env("RALLY_DATA_DIR", &empty)
+            .output()
+            .expect("rally runs")
+    };
+    // Not imported yet: the message says how to import it.
+    for args in [
+        vec![
+            "eval",
+            "scripted",
+            "--model",
+            "myochallenge",
+            "--episodes",
+            "1",
+        ],
+        vec!["match", "scripted", "scripted", "--model", "myochallenge"],
+        vec![
+            "checkpoint",
+            "validate",
+            "x.json",
+            "--model",
+            "myochallenge",
+        ],
+    ] {
+        let out = run(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("rally model import myosuite"),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    // A model without the grip's bodies, and a file that is not there.
+    let model = empty.join("bare.xml");
+    std::fs::create_dir_all(&empty).unwrap();
+    std::fs::write(
+        &model,
+        r#"<mujoco><worldbody><body name="a"><joint name="j"/><geom size="0.1" mass="1"/></body></worldbody></mujoco>"#,
+    )
+    .unwrap();
+    let out = run(&["eval", "scripted", "--model", model.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("grip.hand_body"));
+    let out = run(&["eval", "scripted", "--model", "no-such-file.xml"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no-such-file.xml"));
+    let _ = std::fs::remove_dir_all(&empty);
+}

@@ -31,10 +31,20 @@ fn main() {
             _ => panic!("unknown parameter {k}"),
         }
     }
-    let model = Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap());
+    // RALLY_MYOCHALLENGE: the imported MyoChallenge robot's file, to tune on it instead.
+    let (model, config) = match std::env::var_os("RALLY_MYOCHALLENGE") {
+        Some(path) => (
+            sim::mjcf::load(std::path::Path::new(&path), &|p| std::fs::read_to_string(p)).unwrap(),
+            sim::config::ArenaConfig::myochallenge(),
+        ),
+        None => (
+            sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap(),
+            sim::config::ArenaConfig::default(),
+        ),
+    };
     let e = Evaluation {
-        model,
-        config: sim::config::ArenaConfig::default(),
+        model: Arc::new(model),
+        config,
         preset: sim::arena::MYOCHALLENGE,
         kind: ServeKind::P2,
         episodes,

@@ -30,6 +30,82 @@ pub struct IkSolution {
     pub normal_error: f64,
 }
 
+/// What the independent joints do in a stroke, read from the model's tree so that any robot whose
+/// paddle is welded to a hand gets the same treatment.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct JointRoles {
+    /// The fingers: joints of the bodies below the hand (the paddle's parent), the paddle's own
+    /// subtree excepted. They hold the handle, so they take no part in placing the blade.
+    pub hand: Vec<usize>,
+    /// The torso: hinges on the way to the hand that carry more than a fifth of the robot's mass (the
+    /// lumbar spine, not the shoulder).
+    pub torso: Vec<usize>,
+    /// The forearm's rotation and the wrist: the last three hinges on the way to the hand.
+    pub distal: Vec<usize>,
+}
+
+/// Share of the robot's mass above which a joint counts as the torso's.
+const TORSO_MASS_SHARE: f64 = 0.2;
+
+impl JointRoles {
+    /// The roles in `model` whose paddle is `paddle_body`.
+    pub fn of(model: &Model, paddle_body: usize) -> JointRoles {
+        let nb = model.bodies.len();
+        let below = |b: usize, top: usize| {
+            let mut x = Some(b);
+            while let Some(c) = x {
+                if c == top {
+                    return true;
+                }
+                x = model.bodies[c].parent;
+            }
+            false
+        };
+        let hand_body = model.bodies[paddle_body].parent.unwrap_or(0);
+        let joints_of = |b: usize| {
+            let body = &model.bodies[b];
+            body.first_joint..body.first_joint + body.joint_count
+        };
+        let hand = (0..nb)
+            .filter(|&b| b != hand_body && below(b, hand_body) && !below(b, paddle_body))
+            .flat_map(joints_of)
+            .filter(|&j| !model.is_dependent(j))
+            .collect();
+        // Mass carried by each body's joints: its subtree's.
+        let mut carried = vec![0.0; nb];
+        for b in (0..nb).rev() {
+            carried[b] += model.bodies[b].mass;
+            if let Some(p) = model.bodies[b].parent {
+                carried[p] += carried[b];
+            }
+        }
+        let total = carried[0];
+        let mut path = Vec::new();
+        let mut x = Some(hand_body);
+        while let Some(b) = x {
+            path.push(b);
+            x = model.bodies[b].parent;
+        }
+        path.reverse();
+        let chain: Vec<usize> = path
+            .iter()
+            .flat_map(|&b| joints_of(b))
+            .filter(|&j| model.joints[j].kind == JointKind::Hinge && !model.is_dependent(j))
+            .collect();
+        let torso = chain
+            .iter()
+            .copied()
+            .filter(|&j| carried[model.joints[j].body] > TORSO_MASS_SHARE * total)
+            .collect();
+        let distal = chain[chain.len().saturating_sub(3)..].to_vec();
+        JointRoles {
+            hand,
+            torso,
+            distal,
+        }
+    }
+}
+
 /// The solver for one model.
 #[derive(Debug, Clone)]
 pub struct PaddleIk {
@@ -61,13 +137,10 @@ impl PaddleIk {
                     && !exclude.contains(&j)
             })
             .collect();
-        // Slides (the pelvis) are cheap; hinges cost more; the torso costs most.
-        let torso = |j: usize| model.couplings.iter().any(|c| c.independent == Some(j));
+        let roles = JointRoles::of(model, paddle_body);
+        let torso = |j: usize| roles.torso.contains(&j);
         // Light distal joints (the wrist) are easily shaken by the grip and the swing: they move least.
-        let distal = |j: usize| {
-            let name = model.joints[j].name.as_str();
-            name.starts_with("wrist") || name == "pronation"
-        };
+        let distal = |j: usize| roles.distal.contains(&j);
         let mobility = joints
             .iter()
             .map(|&j| match model.joints[j].kind {
@@ -238,5 +311,25 @@ impl PaddleIk {
     pub fn blade_at(&mut self, model: &Model, qpos: &[f64]) -> (V3, V3) {
         self.kin.update(model, qpos);
         self.blade()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_built_in_body_has_a_lumbar_torso_a_wrist_and_one_grip_joint() {
+        let model = sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap();
+        let roles = JointRoles::of(&model, model.body("paddle").unwrap());
+        let names = |js: &[usize]| -> Vec<String> {
+            js.iter().map(|&j| model.joints[j].name.clone()).collect()
+        };
+        assert_eq!(names(&roles.hand), ["grip"]);
+        assert_eq!(names(&roles.torso), ["L5S1_flex", "L5S1_lat", "L5S1_rot"]);
+        assert_eq!(
+            names(&roles.distal),
+            ["pronation", "wrist_flex", "wrist_dev"]
+        );
     }
 }

@@ -60,6 +60,66 @@ impl ObsBlock {
             ObsBlock::Command => 11,
         }
     }
+
+    /// Names of this block's entries for `model` (its joints' and muscles' names), e.g.
+    /// `qpos.elbow_flex`, `act.FDS`, `ball_pos.x`, `command.t_strike`.
+    pub fn names(self, model: &Model, space: &ActionSpace) -> Vec<String> {
+        let tag = |prefix: &str, parts: &[&str]| -> Vec<String> {
+            parts.iter().map(|p| format!("{prefix}.{p}")).collect()
+        };
+        let joints = |prefix: &str| -> Vec<String> {
+            let n: Vec<&str> = space
+                .joints
+                .iter()
+                .map(|&j| model.joints[j].name.as_str())
+                .collect();
+            tag(prefix, &n)
+        };
+        let muscles = |prefix: &str| -> Vec<String> {
+            let n: Vec<&str> = space
+                .muscles
+                .iter()
+                .map(|&a| model.actuators[a].name.as_str())
+                .collect();
+            tag(prefix, &n)
+        };
+        match self {
+            ObsBlock::Qpos => joints("qpos"),
+            ObsBlock::Qvel => joints("qvel"),
+            ObsBlock::Act => muscles("act"),
+            ObsBlock::MuscleLength => muscles("muscle_length"),
+            ObsBlock::BallPos => tag("ball_pos", &["x", "y", "z"]),
+            ObsBlock::BallVel => tag("ball_vel", &["x", "y", "z"]),
+            ObsBlock::Paddle => tag(
+                "paddle",
+                &[
+                    "x", "y", "z", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "wx", "wy", "wz",
+                ],
+            ),
+            ObsBlock::Command => tag(
+                "command",
+                &[
+                    "strike_x",
+                    "strike_y",
+                    "strike_z",
+                    "racket_vx",
+                    "racket_vy",
+                    "racket_vz",
+                    "racket_qw",
+                    "racket_qx",
+                    "racket_qy",
+                    "racket_qz",
+                    "t_strike",
+                ],
+            ),
+        }
+    }
+}
+
+/// Names of the entries of an observation of `blocks` on `model`, in order.
+pub fn observation_names(model: &Model, blocks: &[ObsBlock]) -> Vec<String> {
+    let space = ActionSpace::new(model);
+    blocks.iter().flat_map(|b| b.names(model, &space)).collect()
 }
 
 /// Builds observations for one robot, keeping the planner's current command.

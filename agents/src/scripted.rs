@@ -5,8 +5,8 @@
 //! Timeline for each incoming ball: as soon as it flies towards the robot, plan (and re-plan once
 //! after its bounce); move to the backswing pose; swing through the strike pose during `swing_time`
 //! centred on the predicted strike (shifted earlier by `lead` for the muscles' lag); hold the
-//! follow-through briefly; go back to the ready posture. The grip joint is always driven past its
-//! stop so the hand squeezes the handle.
+//! follow-through briefly; go back to the ready posture. The fingers hold the ready posture's grasp
+//! (the built-in body's single grip joint is driven past its stop so the hand squeezes the handle).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -95,6 +95,8 @@ pub struct Scripted {
     rng: Rng,
     bounce: BounceModel,
     grip_joint: Option<usize>,
+    /// The finger joints (and the grip joint): held, never placed by the IK.
+    hand: Vec<usize>,
     targets: Vec<f64>,
     integral: Vec<f64>,
     follow_until: f64,
@@ -114,7 +116,8 @@ impl Scripted {
     ) -> Result<Scripted, String> {
         let kmac = Kmac::new(model, params.gains);
         let grip_joint = model.joint("grip");
-        let exclude: Vec<usize> = grip_joint.into_iter().collect();
+        let hand = crate::ik::JointRoles::of(model, paddle_body).hand;
+        let exclude: Vec<usize> = hand.iter().copied().chain(grip_joint).collect();
         let blade = sim::geometry::PaddleShape::from_model(model, paddle_body)?
             .blade
             .center;
@@ -150,6 +153,7 @@ impl Scripted {
             rng: Rng::seeded(seed),
             bounce,
             grip_joint,
+            hand: exclude,
             targets,
             integral,
             follow_until: f64::NEG_INFINITY,
@@ -243,14 +247,13 @@ impl Scripted {
             100,
         );
         let offset = if self.params.gravity_feedforward {
-            let skip: Vec<usize> = self.grip_joint.into_iter().collect();
             gravity_offset(
                 model,
                 &mut self.data,
                 &self.kmac.space,
                 &self.params.gains,
                 &pre.qpos,
-                &skip,
+                &self.hand,
             )
         } else {
             vec![0.0; self.targets.len()]
@@ -317,9 +320,12 @@ impl Scripted {
                 self.stroke = None;
             }
         }
-        if let Some(g) = self.grip_joint {
-            if let Some(i) = self.kmac.space.joints.iter().position(|&j| j == g) {
+        // The fingers keep the ready posture's grasp; a single grip joint is squeezed past its stop.
+        for (i, &j) in self.kmac.space.joints.iter().enumerate() {
+            if Some(j) == self.grip_joint {
                 self.targets[i] = self.params.grip_target;
+            } else if self.hand.contains(&j) {
+                self.targets[i] = self.ready[model.joints[j].qpos_adr];
             }
         }
         // Feed-forward: lead the targets by what holds them against gravity; outer loop: by the
@@ -336,7 +342,7 @@ impl Scripted {
             .map(|(z, o)| z + o)
             .collect();
         for (i, &j) in self.kmac.space.joints.iter().enumerate() {
-            if self.kmac.space.servos[i].is_some() || Some(j) == self.grip_joint {
+            if self.kmac.space.servos[i].is_some() || self.hand.contains(&j) {
                 continue;
             }
             let err = self.targets[i] - robot.state.qpos[model.joints[j].qpos_adr];

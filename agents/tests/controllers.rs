@@ -216,3 +216,29 @@ fn ik_reaches_the_hitting_plane_with_the_blade_facing_the_net() {
     }
     assert!(worst < 0.01, "worst position error {worst}");
 }
+
+#[test]
+fn every_observation_and_action_entry_has_a_name() {
+    use agents::controller::ActionMapper;
+    use agents::observation::{observation_names, ObsBlock, Observer};
+    use agents::ppo::{Method, TrainConfig};
+    let m = model();
+    let names = observation_names(&m, &ObsBlock::ALL);
+    assert_eq!(
+        names.len(),
+        Observer::new(&m, ObsBlock::ALL.to_vec(), 0).size()
+    );
+    assert_eq!(names[0], "qpos.pelvis_tx");
+    assert!(names.contains(&"muscle_length.FDS".to_string()));
+    assert_eq!(names.last().unwrap(), "command.t_strike");
+    let unique: std::collections::HashSet<&String> = names.iter().collect();
+    assert_eq!(unique.len(), names.len(), "observation names repeat");
+    let config = TrainConfig::default();
+    for method in Method::ALL {
+        let mapper = ActionMapper::new(&m, &config.controller(method, &m));
+        let names = mapper.action_names(&m);
+        assert_eq!(names.len(), mapper.action_dim(), "{method:?}");
+        let unique: std::collections::HashSet<&String> = names.iter().collect();
+        assert_eq!(unique.len(), names.len(), "{method:?}: action names repeat");
+    }
+}

@@ -13,6 +13,8 @@ use super::CliError;
 pub struct CheckpointArgs {
     #[command(subcommand)]
     command: CheckpointCommand,
+    #[command(flatten)]
+    model: super::ModelArg,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -24,7 +26,8 @@ enum Act {
 
 #[derive(Subcommand, Debug)]
 enum CheckpointCommand {
-    /// Print a zero-weight checkpoint for the default robot (JSON), to fill with trained weights.
+    /// Print a zero-weight checkpoint for the robot (JSON; `--model`, default the built-in body), to
+    /// fill with trained weights.
     Template {
         /// Controller the policy drives.
         #[arg(long, default_value = "kmac", value_parser = ["kmac", "muscle_pd", "direct", "dynsyn"])]
@@ -39,7 +42,7 @@ enum CheckpointCommand {
         #[arg(long, default_value = "template")]
         name: String,
     },
-    /// Check a checkpoint against the default robot; prints its shape, or the field that is wrong.
+    /// Check a checkpoint against the robot (`--model`); prints its shape, or the field that is wrong.
     Validate {
         /// Checkpoint file.
         file: PathBuf,
@@ -68,7 +71,7 @@ enum CheckpointCommand {
 
 /// Runs `rally checkpoint`.
 pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
-    let model = super::default_model()?;
+    let model = args.model.load()?.model;
     match &args.command {
         CheckpointCommand::Template {
             controller,

@@ -12,7 +12,7 @@ use super::{parse_preset, CliError};
 #[derive(Args, Debug)]
 #[command(
     after_help = "Agents: scripted, scripted-drive, scripted-soft, a committed checkpoint by name (kmac, muscle-ppo, …: config/checkpoints/NAME.json)\nor a checkpoint file (rally train writes OUT/checkpoint.json).\n\n\
-                  Example:\n  rally eval scripted --episodes 200 --seed 1 --serve p2"
+                  Examples:\n  rally eval scripted --episodes 200 --seed 1 --serve p2\n  rally eval scripted --model myochallenge --episodes 1000 --seed 2026"
 )]
 pub struct EvalArgs {
     /// The agent: a scripted variant's name or a checkpoint file.
@@ -38,11 +38,13 @@ pub struct EvalArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    model: super::ModelArg,
 }
 
-fn print_table(r: &EvalReport) {
+fn print_table(r: &EvalReport, model: &str) {
     println!(
-        "{} on {} {} serves (seed {}):",
+        "{} on {} {} serves (seed {}, model {model}):",
         r.agent, r.episodes, r.serve, r.seed
     );
     let rate = |name: &str, x: &agents::eval::Rate| {
@@ -94,12 +96,15 @@ pub fn mean_action(spec: agents::factory::PlayerSpec) -> agents::factory::Player
 
 /// Runs `rally eval`.
 pub fn run(args: &EvalArgs) -> Result<(), CliError> {
-    let model = super::default_model()?;
+    let super::Body {
+        model,
+        config,
+        name,
+    } = args.model.load()?;
     let mut spec = super::player(&args.agent, &model, "AGENT")?;
     if args.mean_action {
         spec = mean_action(spec);
     }
-    let config = sim::config::ArenaConfig::default();
     let kind = ServeKind::parse(&args.serve).expect("clap checked the serve's name");
     let bar = ProgressBar::new(args.episodes);
     bar.set_style(
@@ -119,12 +124,11 @@ pub fn run(args: &EvalArgs) -> Result<(), CliError> {
         evaluate(&evaluation, &spec, &tick).map_err(|e| CliError::Failed(anyhow::anyhow!(e)))?;
     bar.finish_and_clear();
     if args.json {
-        println!(
-            "{}",
-            serde_json::to_string(&report).map_err(anyhow::Error::from)?
-        );
+        let mut v = serde_json::to_value(&report).map_err(anyhow::Error::from)?;
+        v["model"] = name.into();
+        println!("{v}");
     } else {
-        print_table(&report);
+        print_table(&report, &name);
     }
     Ok(())
 }

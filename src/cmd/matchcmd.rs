@@ -43,6 +43,8 @@ pub struct MatchArgs {
     /// bank for training on the balls a rally brings (`[bank] file` in a training configuration).
     #[arg(long, value_name = "FILE")]
     returns: Option<PathBuf>,
+    #[command(flatten)]
+    model: super::ModelArg,
 }
 
 fn print_table(r: &MatchRecord) {
@@ -84,14 +86,18 @@ fn print_table(r: &MatchRecord) {
 
 /// Runs `rally match`.
 pub fn run(args: &MatchArgs) -> Result<(), CliError> {
-    let model = super::default_model()?;
+    let super::Body {
+        model,
+        config,
+        name,
+    } = args.model.load()?;
     let (a, b) = (
         super::player(&args.a, &model, "A")?,
         super::player(&args.b, &model, "B")?,
     );
     let spec = MatchSpec {
         model,
-        config: sim::config::ArenaConfig::default(),
+        config,
         preset: args.preset,
         rallies: args.rallies,
         seed: args.seed,
@@ -109,6 +115,7 @@ pub fn run(args: &MatchArgs) -> Result<(), CliError> {
         let doc = json!({
             "sim_version": sim::SIM_VERSION,
             "a": record.a, "b": record.b, "seed": record.seed, "preset": record.preset,
+            "model": name,
             "hz": agents::matchrun::REPLAY_HZ,
             "rallies": replay,
         });

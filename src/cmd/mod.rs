@@ -93,6 +93,53 @@ pub fn default_model() -> Result<std::sync::Arc<sim::model::Model>, CliError> {
     Ok(std::sync::Arc::new(m))
 }
 
+/// `--model`: the robot that plays, for the commands that run one.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ModelArg {
+    /// The robot: `default` (the built-in 75-muscle body), `myochallenge` (MyoSuite's 273-muscle
+    /// robot, after `rally model import myosuite`) or an MJCF file (played with the built-in arena's
+    /// grip: hand body `hand`, paddle body `paddle`, flexors FDS, FDP and FPL).
+    #[arg(
+        long = "model",
+        id = "model",
+        value_name = "MODEL",
+        default_value = "default",
+        global = true
+    )]
+    pub name: String,
+}
+
+/// A robot ready to play: its model, its arena configuration (the grip) and its name.
+pub struct Body {
+    /// The model.
+    pub model: std::sync::Arc<sim::model::Model>,
+    /// Its arena configuration.
+    pub config: sim::config::ArenaConfig,
+    /// As `--model` gave it.
+    pub name: String,
+}
+
+impl ModelArg {
+    /// Loads the model and checks that its grip configuration fits it (a usage error otherwise).
+    pub fn load(&self) -> Result<Body, CliError> {
+        let model = match self.name.as_str() {
+            "default" => default_model()?,
+            other => std::sync::Arc::new(model::resolve_model(other)?.0),
+        };
+        let config = match self.name.as_str() {
+            "myochallenge" => sim::config::ArenaConfig::myochallenge(),
+            _ => sim::config::ArenaConfig::default(),
+        };
+        sim::robot::Robot::new(model.clone(), &config.grip, sim::Side::A)
+            .map_err(|e| CliError::Usage(format!("--model {}: {e}", self.name)))?;
+        Ok(Body {
+            model,
+            config,
+            name: self.name.clone(),
+        })
+    }
+}
+
 /// An agent argument: a scripted variant's name or a checkpoint file (a usage error names `which`).
 pub fn player(
     name: &str,

@@ -70,6 +70,8 @@ pub struct TrainArgs {
     /// No progress bar; one line per checkpoint instead.
     #[arg(long)]
     quiet: bool,
+    #[command(flatten)]
+    model: super::ModelArg,
 }
 
 fn parse_method(s: &str) -> Result<Method, String> {
@@ -245,7 +247,7 @@ fn validate(
 /// Runs `rally train`.
 pub fn run(args: &TrainArgs) -> Result<(), CliError> {
     agents::ppo::fix_matmul_threads();
-    let model = super::default_model()?;
+    let body = args.model.load()?;
     let mut config = match &args.config {
         Some(p) => read_config(p)?,
         None => TrainConfig::default(),
@@ -292,7 +294,16 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
                 args.out.display()
             )));
         }
-        dir.load(model).map_err(|e| anyhow!(e))?
+        if state.model != body.name {
+            return Err(CliError::Usage(format!(
+                "--resume: {} trains the {} robot, not {} (--model)",
+                args.out.display(),
+                state.model,
+                body.name
+            )));
+        }
+        dir.load_on(body.model, body.config, &body.name)
+            .map_err(|e| anyhow!(e))?
     } else {
         if dir.has_state() {
             return Err(CliError::Usage(format!(
@@ -300,7 +311,15 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
                 args.out.display()
             )));
         }
-        let mut t = Trainer::new(model, args.method, config, args.seed).map_err(|e| anyhow!(e))?;
+        let mut t = Trainer::on(
+            body.model,
+            body.config,
+            &body.name,
+            args.method,
+            config,
+            args.seed,
+        )
+        .map_err(|e| anyhow!(e))?;
         if let Some(init) = &args.init {
             RunDir::open(init)
                 .and_then(|d| d.warm_start(&mut t, args.init_optimizer.into()))

@@ -299,6 +299,39 @@ impl ActionMapper {
         }
     }
 
+    /// Names of the action's entries on `model`: `target.JOINT` (K-MAC's joint targets),
+    /// `muscle.NAME` (a muscle's control, or its length target under Muscle-PD), `synergy.K` and
+    /// `weight.NAME` (DynSyn), `servo.JOINT` (a pelvis servo's position target).
+    pub fn action_names(&self, model: &Model) -> Vec<String> {
+        let s = self.space();
+        let muscles = |prefix: &str| -> Vec<String> {
+            s.muscles
+                .iter()
+                .map(|&a| format!("{prefix}.{}", model.actuators[a].name))
+                .collect()
+        };
+        let servos: Vec<String> = s
+            .servo_joints()
+            .map(|(j, _)| format!("servo.{}", model.joints[j].name))
+            .collect();
+        match self {
+            ActionMapper::Kmac(_) => s
+                .joints
+                .iter()
+                .map(|&j| format!("target.{}", model.joints[j].name))
+                .collect(),
+            ActionMapper::MusclePd(_) | ActionMapper::Direct(_) => {
+                [muscles("muscle"), servos].concat()
+            }
+            ActionMapper::Dynsyn(_, syn) => [
+                (0..syn.groups).map(|g| format!("synergy.{g}")).collect(),
+                muscles("weight"),
+                servos,
+            ]
+            .concat(),
+        }
+    }
+
     /// Controls for `action` (length [`ActionMapper::action_dim`], entries in [−1, 1]).
     pub fn controls(
         &mut self,

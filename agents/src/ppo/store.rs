@@ -42,6 +42,10 @@ pub struct RunState {
     pub seed: u64,
     /// Its configuration.
     pub config: TrainConfig,
+    /// The robot it trains (`default`, `myochallenge` or a model file); runs saved before the
+    /// choice existed trained the built-in body.
+    #[serde(default = "built_in_body")]
+    pub model: String,
     /// Counters, statistics and the curve.
     pub progress: Progress,
     /// Observation statistics.
@@ -50,6 +54,10 @@ pub struct RunState {
     pub adam_steps: u64,
     /// The learning rate now.
     pub learning_rate: f64,
+}
+
+fn built_in_body() -> String {
+    "default".into()
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> String {
@@ -143,6 +151,7 @@ impl RunDir {
             method: t.method,
             seed: t.seed,
             config: t.config.clone(),
+            model: t.model_name.clone(),
             progress: t.progress.clone(),
             normalizer: t.normalizer.clone(),
             adam_steps: t.adam.t,
@@ -234,11 +243,36 @@ impl RunDir {
         Ok(())
     }
 
-    /// Rebuilds the trainer from the saved state.
+    /// Rebuilds the trainer of a run on the built-in body from the saved state.
     pub fn load(&self, model: Arc<Model>) -> Result<Trainer, String> {
+        self.load_on(model, sim::config::ArenaConfig::default(), "default")
+    }
+
+    /// Rebuilds the trainer from the saved state, on `model` (which must be the one the run
+    /// recorded, `model_name`) in the arena `arena` configures.
+    pub fn load_on(
+        &self,
+        model: Arc<Model>,
+        arena: sim::config::ArenaConfig,
+        model_name: &str,
+    ) -> Result<Trainer, String> {
         let state = self.read_state()?;
+        if state.model != model_name {
+            return Err(format!(
+                "{} trains the {} robot, not {model_name}",
+                self.dir.display(),
+                state.model
+            ));
+        }
         let (path, tensors) = self.read_tensors()?;
-        let mut t = Trainer::new(model, state.method, state.config.clone(), state.seed)?;
+        let mut t = Trainer::on(
+            model,
+            arena,
+            model_name,
+            state.method,
+            state.config.clone(),
+            state.seed,
+        )?;
         Self::set_net(&mut t, &path, &tensors)?;
         Self::set_adam(&mut t, &state, &path, &tensors)?;
         t.normalizer = state.normalizer;

@@ -309,6 +309,10 @@ pub struct Trainer {
     /// Robots per environment.
     agents: usize,
     model: Arc<Model>,
+    /// The arena configuration of the robot (its grip).
+    pub arena: ArenaConfig,
+    /// The robot's name as the command line gave it (`default`, `myochallenge`, a file).
+    pub model_name: String,
 }
 
 /// The ball bank `[bank] file` names, read once for every environment; `None` without a file.
@@ -327,23 +331,20 @@ fn read_bank(config: &TrainConfig) -> Result<Option<crate::env::BallBank>, Strin
 /// The training environment a method runs in; its observation and action sizes.
 fn make_env(
     model: &Arc<Model>,
+    arena: &ArenaConfig,
     controller: &ControllerSpec,
     config: &TrainConfig,
     bank: Option<&crate::env::BallBank>,
 ) -> Result<(TrainingEnv, usize, usize), String> {
-    // Both environments: the default arena, MyoChallenge contact laws, every observation block.
-    let (arena, preset, blocks) = (
-        ArenaConfig::default(),
-        sim::arena::MYOCHALLENGE,
-        ObsBlock::ALL.to_vec(),
-    );
+    // Both environments: MyoChallenge contact laws, every observation block.
+    let (preset, blocks) = (sim::arena::MYOCHALLENGE, ObsBlock::ALL.to_vec());
     let grip_floor = config.controller.grip_floor;
     Ok(match config.env {
         TrainEnv::Single => {
             let kind = config.serve.kind();
             let mut env = Env::new(
                 model.clone(),
-                &arena,
+                arena,
                 preset,
                 controller,
                 blocks,
@@ -359,7 +360,7 @@ fn make_env(
         TrainEnv::Rally => {
             let mut env = RallyEnv::new(
                 model.clone(),
-                &arena,
+                arena,
                 preset,
                 controller,
                 blocks,
@@ -386,9 +387,29 @@ fn mean_of(xs: impl Iterator<Item = f64>) -> f64 {
 }
 
 impl Trainer {
-    /// A fresh run of `method` on `model`.
+    /// A fresh run of `method` on `model` (the built-in body's arena, see [`Trainer::on`]).
     pub fn new(
         model: Arc<Model>,
+        method: Method,
+        config: TrainConfig,
+        seed: u64,
+    ) -> Result<Trainer, String> {
+        Trainer::on(
+            model,
+            ArenaConfig::default(),
+            "default",
+            method,
+            config,
+            seed,
+        )
+    }
+
+    /// A fresh run of `method` on `model` in the arena `arena` configures (its grip); `model_name`
+    /// is what the run records, so that `--resume` refuses another robot.
+    pub fn on(
+        model: Arc<Model>,
+        arena: ArenaConfig,
+        model_name: &str,
         method: Method,
         config: TrainConfig,
         seed: u64,
@@ -396,7 +417,7 @@ impl Trainer {
         config.validate()?;
         let controller = config.controller(method, &model);
         let bank = read_bank(&config)?;
-        let (_, obs_dim, act_dim) = make_env(&model, &controller, &config, bank.as_ref())?;
+        let (_, obs_dim, act_dim) = make_env(&model, &arena, &controller, &config, bank.as_ref())?;
         let agents = config.env.agents();
         let p = &config.ppo;
         let net = ActorCritic::new(
@@ -411,7 +432,7 @@ impl Trainer {
         let slots = (0..p.envs)
             .map(|_| {
                 Ok(Slot {
-                    env: make_env(&model, &controller, &config, bank.as_ref())?.0,
+                    env: make_env(&model, &arena, &controller, &config, bank.as_ref())?.0,
                     episode: 0,
                     running: vec![Running::default(); agents],
                 })
@@ -442,6 +463,8 @@ impl Trainer {
             agents,
             config,
             model,
+            arena,
+            model_name: model_name.to_string(),
         })
     }
 
@@ -789,7 +812,7 @@ impl Trainer {
             "",
             "",
         )?));
-        let (config, preset) = (ArenaConfig::default(), sim::arena::MYOCHALLENGE);
+        let (config, preset) = (self.arena.clone(), sim::arena::MYOCHALLENGE);
         let (score, longest) = match self.config.validation_env() {
             TrainEnv::Rally => {
                 let spec = self.match_spec(v.episodes as u32, v.seed);
@@ -840,12 +863,12 @@ impl Trainer {
         Ok(ck)
     }
 
-    /// A match of `rallies` rallies on `seed` in the default arena (MyoChallenge contact laws),
+    /// A match of `rallies` rallies on `seed` in the run's arena (MyoChallenge contact laws),
     /// without replay: what validation and the bank's refresh play.
     fn match_spec(&self, rallies: u32, seed: u64) -> crate::matchrun::MatchSpec {
         crate::matchrun::MatchSpec {
             model: self.model.clone(),
-            config: ArenaConfig::default(),
+            config: self.arena.clone(),
             preset: sim::arena::MYOCHALLENGE,
             rallies,
             seed,

@@ -243,7 +243,55 @@ fn inspect_json(m: &Model) -> Value {
             "polycoef": c.coef,
         })).collect::<Vec<_>>(),
         "keyframes": m.keyframes.iter().map(|k| k.name.clone()).collect::<Vec<_>>(),
+        "spaces": spaces(m),
     })
+}
+
+/// The policy's observation (every block, as training builds it) and each method's action, entry by
+/// entry, on `m`.
+fn spaces(m: &Model) -> Value {
+    use agents::controller::ActionMapper;
+    use agents::observation::{observation_names, ObsBlock};
+    use agents::ppo::{Method, TrainConfig};
+    let config = TrainConfig::default();
+    let actions: serde_json::Map<String, Value> = Method::ALL
+        .iter()
+        .map(|&method| {
+            let mapper = ActionMapper::new(m, &config.controller(method, m));
+            (method.name().to_string(), json!(mapper.action_names(m)))
+        })
+        .collect();
+    json!({
+        "observation": observation_names(m, &ObsBlock::ALL),
+        "actions": actions,
+    })
+}
+
+/// `spaces` in a few lines: how many entries of each kind.
+fn spaces_text(m: &Model) -> String {
+    let v = spaces(m);
+    let count = |names: &Value| {
+        let mut order: Vec<(String, usize)> = Vec::new();
+        for n in names.as_array().into_iter().flatten() {
+            let kind = n.as_str().unwrap_or("").split('.').next().unwrap_or("");
+            match order.last_mut() {
+                Some((k, c)) if k == kind => *c += 1,
+                _ => order.push((kind.to_string(), 1)),
+            }
+        }
+        let total: usize = order.iter().map(|(_, c)| c).sum();
+        let parts: Vec<String> = order.iter().map(|(k, c)| format!("{k} {c}")).collect();
+        format!("{total} ({})", parts.join(", "))
+    };
+    let mut s = format!(
+        "\nspaces (`rally model inspect --json` names every entry)\n  observation  {}\n",
+        count(&v["observation"])
+    );
+    for method in agents::ppo::Method::ALL {
+        let name = method.name();
+        s += &format!("  {name:<12} {}\n", count(&v["actions"][name]));
+    }
+    s
 }
 
 fn inspect_text(m: &Model, path: &Path) -> String {
@@ -329,5 +377,5 @@ fn inspect_text(m: &Model, path: &Path) -> String {
                 .join(", ")
         );
     }
-    s
+    s + &spaces_text(m)
 }
