@@ -1,4 +1,4 @@
-//! `rally`: the one binary of muscle-rally, a thin clap front over the crates (DESIGN §2).
+//! `rally`: the one binary of muscle-rally, a thin clap front over the crates.
 //!
 //! Each subcommand lives in `cmd/` and does its I/O there; the physics stays in `sim`.
 #![forbid(unsafe_code)]
@@ -47,7 +47,38 @@ enum Command {
     Worker(cmd::worker::WorkerArgs),
 }
 
+/// The exit status of a command whose reader went away (`rally … | head`): what a shell reports for
+/// a process that SIGPIPE ended, 128 + 13.
+const CLOSED_STDOUT: u8 = 141;
+
+/// A closed stdout ends a command quietly, as in any shell pipeline, instead of the panic with which
+/// `println!` meets it (Rust ignores SIGPIPE, so a write to a closed pipe is an error, not a signal).
+fn quiet_on_closed_stdout() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let msg = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if msg.starts_with("failed printing to stdout") && msg.contains("Broken pipe") {
+            std::process::exit(CLOSED_STDOUT.into());
+        }
+        default(info);
+    }));
+}
+
+/// Whether a command failed only because its output's reader went away.
+fn closed_stdout(err: &anyhow::Error) -> bool {
+    err.chain().any(|e| {
+        e.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
 fn main() -> ExitCode {
+    quiet_on_closed_stdout();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Ball(args) => cmd::ball::run(&args),
@@ -70,6 +101,7 @@ fn main() -> ExitCode {
             eprintln!("error: {msg}");
             ExitCode::from(2)
         }
+        Err(cmd::CliError::Failed(err)) if closed_stdout(&err) => ExitCode::from(CLOSED_STDOUT),
         Err(cmd::CliError::Failed(err)) => {
             eprintln!("error: {err:#}");
             ExitCode::FAILURE

@@ -155,3 +155,37 @@ fn bad_arguments_exit_2_naming_the_argument() {
         "below the floor",
     );
 }
+
+#[test]
+fn a_reader_that_goes_away_ends_a_command_quietly() {
+    use std::io::Read;
+    use std::process::Stdio;
+    // A long flight (BufWriter, io errors) and a one-shot JSON print (println!).
+    for args in [
+        vec!["ball", "--serve", "p2", "--seed", "1", "--duration", "3600"],
+        vec!["checkpoint", "template", "--hidden", "512,512"],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("rally runs");
+        let mut head = [0u8; 100];
+        child
+            .stdout
+            .take()
+            .unwrap()
+            .read_exact(&mut head)
+            .expect("the first bytes");
+        // The reader is dropped here, as `| head -c 100` would.
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            matches!(out.status.code(), Some(0) | Some(141)),
+            "{args:?}: {:?} {stderr}",
+            out.status
+        );
+        assert!(stderr.is_empty(), "{args:?}: {stderr}");
+    }
+}
