@@ -6,6 +6,10 @@
 The network is a PyTorch-style MLP (Gemm with transB=1, Tanh, Gemm) with a dynamic batch, random
 weights from a seeded generator; `policy_expected.json` holds five random observations and the actions
 numpy computes for them (float32, as ONNX runs). Needs `pip install onnx numpy`.
+
+It also writes `policy_variable_width.onnx`, a hostile policy: `act` finite entries for the zero
+observation (so it passes validation), two more for each negative observation entry (the player must
+refuse its action, not index past it).
 """
 import argparse
 import json
@@ -46,11 +50,40 @@ def main():
     onnx.checker.check_model(model)
     os.makedirs(args.out, exist_ok=True)
     onnx.save(model, os.path.join(args.out, "policy.onnx"))
+    # Hostile: its width is 11 + 2 (k + 1), k the negative observation entries (NonZero gives the row
+    # and column of each of them and of one constant entry, so it is never empty): 13 at zero. The
+    # entries are zeros and those indices, all finite.
+    wide = helper.make_graph(
+        [
+            helper.make_node("Mul", ["obs", "zero"], ["z"]),
+            helper.make_node("Slice", ["z", "start", "end", "axis"], ["base"]),
+            helper.make_node("Less", ["obs", "zero"], ["negative"]),
+            helper.make_node("Cast", ["negative"], ["negative_f"], to=TensorProto.FLOAT),
+            helper.make_node("Concat", ["negative_f", "one"], ["mask"], axis=1),
+            helper.make_node("NonZero", ["mask"], ["where"]),
+            helper.make_node("Cast", ["where"], ["where_f"], to=TensorProto.FLOAT),
+            helper.make_node("Flatten", ["where_f"], ["extra"], axis=0),
+            helper.make_node("Concat", ["base", "extra"], ["action"], axis=1),
+        ],
+        "variable_width",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, args.obs])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, [1, None])],
+        [numpy_helper.from_array(np.zeros(1, np.float32), "zero"),
+         numpy_helper.from_array(np.ones((1, 1), np.float32), "one"),
+         numpy_helper.from_array(np.array([0], np.int64), "start"),
+         numpy_helper.from_array(np.array([args.act - 2], np.int64), "end"),
+         numpy_helper.from_array(np.array([1], np.int64), "axis")],
+    )
+    hostile = helper.make_model(wide, opset_imports=[helper.make_opsetid("", 13)])
+    hostile.ir_version = 8
+    onnx.checker.check_model(hostile)
+    onnx.save(hostile, os.path.join(args.out, "policy_variable_width.onnx"))
     x = rng.standard_normal((5, args.obs)).astype(np.float32)
     y = np.tanh(x @ w1.T + b1) @ w2.T + b2
     with open(os.path.join(args.out, "policy_expected.json"), "w") as f:
         json.dump({"inputs": x.tolist(), "outputs": y.astype(np.float32).tolist()}, f)
-    print(f"wrote policy.onnx ({args.obs} -> {args.hidden} -> {args.act}) and policy_expected.json to {args.out}")
+    print(f"wrote policy.onnx ({args.obs} -> {args.hidden} -> {args.act}), policy_expected.json and "
+          f"policy_variable_width.onnx to {args.out}")
 
 
 if __name__ == "__main__":

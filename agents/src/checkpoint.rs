@@ -264,7 +264,12 @@ impl Network {
             Network::Onnx(plan, n) => {
                 let data: Vec<f32> = obs.iter().map(|&x| x as f32).collect();
                 let input = Tensor::from_shape(&[1, *n], &data).ok()?;
-                let out = plan.run(tvec!(input.into())).ok()?;
+                // tract may panic on a graph it accepted (the fuzz target found two at load time):
+                // contained here, it is an invalid action, not a crashed worker.
+                let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    plan.run(tvec!(input.into()))
+                }));
+                let out = run.ok()?.ok()?;
                 let view = out.first()?.to_plain_array_view::<f32>().ok()?;
                 Some(view.iter().map(|&x| x as f64).collect())
             }
@@ -737,7 +742,9 @@ impl Player for CheckpointPlayer {
             *x = (*x - m) / s;
         }
         let mut action = self.network.forward(&self.obs).ok_or(InvalidAction)?;
-        if action.iter().any(|a| !a.is_finite()) {
+        // Validation ran the network on one observation only: an ONNX graph may answer others with
+        // another width.
+        if action.len() != self.mapper.action_dim() || action.iter().any(|a| !a.is_finite()) {
             return Err(InvalidAction);
         }
         self.mean.clone_from(&action);

@@ -6,7 +6,8 @@
 use sim::ball::BallState;
 use sim::robot::Robot;
 
-/// The player produced controls that are not finite numbers (NaN or infinite): INVALID_ACTION.
+/// The player produced controls that are not finite numbers (NaN or infinite), or its network failed
+/// or answered with an action of the wrong width: INVALID_ACTION.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct InvalidAction;
 

@@ -146,3 +146,31 @@ fn an_onnx_model_without_an_input_is_refused_not_a_panic() {
     let e = refused("onnx_no_input.onnx");
     assert!(e.message.contains("it takes 0 inputs, not one"), "{e}");
 }
+
+#[test]
+fn an_onnx_policy_whose_width_changes_with_its_input_forfeits_instead_of_panicking() {
+    // `tools/make_onnx_policy.py`: 13 zeros for the zero observation, two more entries per negative
+    // observation entry. Validation sees the right width; play must not index past it.
+    let m = model();
+    let bytes = include_bytes!("fixtures/policy_variable_width.onnx");
+    let ck = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, bytes);
+    ck.validate(&m).unwrap_or_else(|e| panic!("{e}"));
+    let net = ck.network().unwrap();
+    assert_eq!(net.forward(&[0.0; 206]).unwrap().len(), 13);
+    assert_eq!(net.forward(&[-1.0; 206]).unwrap().len(), 13 + 2 * 206);
+    let e = agents::eval::Evaluation {
+        model: m.clone(),
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        kind: sim::serve::ServeKind::P2,
+        episodes: 3,
+        seed: 1,
+    };
+    let r = agents::eval::evaluate(
+        &e,
+        &agents::factory::PlayerSpec::Checkpoint(Arc::new(ck)),
+        &|| {},
+    )
+    .unwrap();
+    assert_eq!(r.ends, [("INVALID_ACTION".to_string(), 3)]);
+}
