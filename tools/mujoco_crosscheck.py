@@ -16,7 +16,8 @@ and ours differ by design): starting from that posture, the tool perturbs the st
 actuated motion, redraws the controls) until the whole 0.5 s stays at least --clearance from every
 limit, and records the clearance it found. `--keyframe-config` records the first keyframe (with a random
 velocity) before the sampled configurations; `--no-contacts` turns MuJoCo's contacts off for the motions
-(muscle-rally does not simulate contacts between body parts). Needs `pip install mujoco numpy`.
+(muscle-rally does not simulate contacts between body parts); `--fd-moments` also records the moment arms
+as five-point differences of MuJoCo's lengths (null where two step sizes disagree). Needs `pip install mujoco numpy`.
 """
 import argparse
 import json
@@ -100,7 +101,39 @@ def mid_range(m, coup):
     return qpos
 
 
-def position_record(m, d):
+def fd_moments(m, d, h):
+    """Moment arms as MuJoCo's lengths' derivatives: a five-point central difference of
+    `actuator_length` in each hinge and slide joint alone (dependent joints too: a moment arm is the
+    partial derivative per degree of freedom), error O(h^4). Columns of other joints are NaN."""
+    q0 = d.qpos.copy()
+    out = np.full((m.nu, m.nv), np.nan)
+    for j in range(m.njnt):
+        if int(m.jnt_type[j]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            continue
+        adr, dof = m.jnt_qposadr[j], m.jnt_dofadr[j]
+        lengths = []
+        for k in (-2, -1, 1, 2):
+            d.qpos[:] = q0
+            d.qpos[adr] += k * h
+            mujoco.mj_fwdPosition(m, d)
+            lengths.append(d.actuator_length.copy())
+        out[:, dof] = (lengths[0] - 8 * lengths[1] + 8 * lengths[2] - lengths[3]) / (12 * h)
+    d.qpos[:] = q0
+    return out
+
+
+def smooth_fd_moments(m, d):
+    """`fd_moments` at h = 1e-3 where a second step, 2e-3, agrees with it to 1e-10 of the row's
+    largest entry; None where it does not (the length has a kink that close: a wrap changing side or
+    starting) or where the joint is not a hinge or slide."""
+    a, b = fd_moments(m, d, 1e-3), fd_moments(m, d, 2e-3)
+    scale = np.maximum(np.nanmax(np.abs(a), axis=1, initial=0.0), 1e-3)[:, None]
+    ok = np.abs(a - b) <= 1e-10 * scale
+    return [[float(x) if good else None for x, good in zip(row, oks)] for row, oks in zip(a, ok)]
+
+
+def position_record(m, d, fd=False):
+    fd_rows = smooth_fd_moments(m, d) if fd else None
     mujoco.mj_forward(m, d)
     M = np.zeros((m.nv, m.nv))
     mujoco.mj_fullM(m, d, M)
@@ -116,6 +149,7 @@ def position_record(m, d):
         "mass_matrix": M.tolist(),
         "qfrc_bias": d.qfrc_bias.tolist(),
         "qfrc_passive": d.qfrc_passive.tolist(),
+        **({"actuator_moment_fd": fd_rows} if fd else {}),
     }
 
 
@@ -195,6 +229,9 @@ def main():
     ap.add_argument("--quiet", default="", help="comma-separated muscles left at zero control in the actuated motion")
     ap.add_argument("--keyframe-config", action="store_true", help="record the first keyframe before the sampled configurations")
     ap.add_argument("--no-contacts", action="store_true", help="disable contacts (mjDSBL_CONTACT)")
+    ap.add_argument("--fd-moments", action="store_true",
+                    help="also record the moment arms as finite differences of MuJoCo's lengths "
+                         "(actuator_moment_fd), a check independent of MuJoCo's own moment-arm solve")
     ap.add_argument("--motion-start", choices=["key", "mid"], default="key",
                     help="start the motions from the keyframes (default) or with every independent limited joint "
                          "at the middle of its range")
@@ -222,7 +259,7 @@ def main():
         qvel = rng.uniform(-1.0, 1.0, m.nv)
         apply_couplings(m, d.qpos.copy(), coup, qvel)
         d.qvel[:] = qvel
-        configs.append(position_record(m, d))
+        configs.append(position_record(m, d, args.fd_moments))
 
     start = m.key_qpos[0].copy() if m.nkey > 0 else m.qpos0.copy()
     start_qvel = m.key_qvel[0].copy() if m.nkey > 0 else np.zeros(m.nv)

@@ -28,5 +28,6 @@ if [ -n "${RALLY_MYOCHALLENGE:-}" ]; then
   hand=ECRL,ECRB,ECU,FCR,FCU,PL,FDS5,FDS4,FDS3,FDS2,FDP5,FDP4,FDP3,FDP2,EDC5,EDC4,EDC3,EDC2,EDM,EIP,EPL,EPB,FPL,APL,OP
   hand="$hand,RI2,LU_RB2,UI_UB2,RI3,LU_RB3,UI_UB3,RI4,LU_RB4,UI_UB4,RI5,LU_RB5,UI_UB5"
   "$py" tools/mujoco_crosscheck.py "$RALLY_MYOCHALLENGE" "$out/myochallenge.json" \
-    --configs 25 --keyframe-config --no-contacts --motion-start mid --ctrl-range 0.02 0.1 --quiet "$hand"
+    --configs 25 --keyframe-config --no-contacts --motion-start mid --ctrl-range 0.02 0.1 --quiet "$hand" \
+    --fd-moments
 fi

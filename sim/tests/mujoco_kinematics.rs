@@ -25,6 +25,11 @@ const KINEMATICS_TOL: f64 = 1e-12;
 /// arms (not the length, which is stationary in it). Measured: 1.0e-7 on MyoSuite's robot, 7.1e-7 on
 /// the random wrap cases.
 const INSIDE_WRAP_MOMENT_TOL: f64 = 5e-6;
+/// Moment arms against finite differences of MuJoCo's own lengths (the fixture's
+/// `actuator_moment_fd`: five-point differences where two step sizes agree to 1e-10), relative to
+/// the muscle's largest: a check of every moment arm, through inside wraps too, that does not rest on
+/// MuJoCo's moment-arm solve.
+const FD_MOMENT_TOL: f64 = 1e-9;
 /// Mass matrix and bias forces, relative to their largest entry.
 const DYNAMICS_TOL: f64 = 1e-12;
 /// Joint positions after a whole recorded motion without couplings (rad or m).
@@ -154,6 +159,8 @@ fn compare_positions_of(model: &Model, model_file: &str, fx: &Value) {
     let mut lengths_only = TendonKinematics::new(model);
     let mut worst_len: f64 = 0.0;
     let (mut worst_moment, mut worst_inside): (f64, f64) = (0.0, 0.0);
+    // Against MuJoCo's lengths' derivatives: (worst, worst through an inside wrap, entries compared).
+    let (mut worst_fd, mut worst_fd_inside, mut fd_entries): (f64, f64, usize) = (0.0, 0.0, 0);
     let inside = inside_wrap_actuators(model);
     for (i, c) in fx["configs"].as_array().unwrap().iter().enumerate() {
         let qpos = nums(&c["qpos"]);
@@ -209,11 +216,39 @@ fn compare_positions_of(model: &Model, model_file: &str, fx: &Value) {
                 theirs.row(a)
             );
         }
+        if let Some(fd) = c.get("actuator_moment_fd").and_then(Value::as_array) {
+            for (a, row) in fd.iter().enumerate() {
+                let scale = theirs.row(a).amax().max(1e-3);
+                for (d, x) in row.as_array().unwrap().iter().enumerate() {
+                    let Some(x) = x.as_f64() else { continue };
+                    let rel = (ours[(a, d)] - x).abs() / scale;
+                    fd_entries += 1;
+                    if inside[a] {
+                        worst_fd_inside = worst_fd_inside.max(rel);
+                    } else {
+                        worst_fd = worst_fd.max(rel);
+                    }
+                    assert!(
+                        rel < FD_MOMENT_TOL,
+                        "config {i}: {} moment arm in DoF {d}: ours {} vs MuJoCo's length \
+                         derivative {x} ({rel:.1e} of its largest)",
+                        names[a],
+                        ours[(a, d)]
+                    );
+                }
+            }
+        }
     }
     eprintln!(
         "{model_file}: worst length error {worst_len:.2e}, worst moment-arm error {worst_moment:.2e} \
          ({worst_inside:.2e} through an inside wrap), relative to the muscle's largest moment arm"
     );
+    if fd_entries > 0 {
+        eprintln!(
+            "{model_file}: worst moment arm against MuJoCo's lengths' finite differences \
+             {worst_fd:.2e} ({worst_fd_inside:.2e} through an inside wrap), {fd_entries} entries"
+        );
+    }
 }
 
 #[test]
