@@ -61,7 +61,7 @@ pub struct BenchArgs {
     /// Seconds of measurement for each side.
     #[arg(long, default_value = "3", value_parser = parse_seconds)]
     seconds: f64,
-    /// Also time MuJoCo (`mj_step`, nstep per serve) on shared/reference's ball-only scene in this run.
+    /// Also time MuJoCo (`mj_step`, nstep per serve) on the reference scene's ball, table and net (sim/tests/fixtures/myosuite_tt_ball_only.xml) in this run.
     #[arg(long)]
     mujoco: bool,
     /// Python interpreter that has the `mujoco` package.
@@ -70,8 +70,8 @@ pub struct BenchArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
-    /// `robot` only: the model — `default` (the built-in 75-muscle body), `myochallenge`
-    /// (MyoSuite's robot, after `rally model import myosuite`) or an MJCF file.
+    /// `robot`, `agents` and `train`: the model — `default` (the built-in 75-muscle body),
+    /// `myochallenge` (MyoSuite's robot, after `rally model import myosuite`) or an MJCF file.
     #[arg(long, default_value = "default")]
     model: String,
     /// Concurrent keep-alive clients (`server` only).
@@ -116,14 +116,6 @@ pub fn ball_steps_per_second(seconds: f64) -> (f64, u64) {
     (steps as f64 / start.elapsed().as_secs_f64(), steps)
 }
 
-fn robot_model() -> anyhow::Result<std::sync::Arc<sim::model::Model>> {
-    let model = sim::mjcf::parse_str(
-        sim::config::DEFAULT_MODEL_XML,
-        "config/models/upper_body.xml",
-    )?;
-    Ok(std::sync::Arc::new(model))
-}
-
 fn run_python(
     python: &Path,
     script: &str,
@@ -160,12 +152,14 @@ fn mujoco_steps_per_second(python: &Path, seconds: f64) -> anyhow::Result<(f64, 
 }
 
 /// (evaluation episodes/s, match rallies/s, simulated seconds per rally), on one thread.
-fn agent_rates(seconds: f64) -> anyhow::Result<(f64, f64, f64)> {
+fn agent_rates(
+    seconds: f64,
+    model: std::sync::Arc<sim::model::Model>,
+    config: sim::config::ArenaConfig,
+) -> anyhow::Result<(f64, f64, f64)> {
     use agents::eval::{evaluate, Evaluation};
     use agents::factory::PlayerSpec;
     use agents::matchrun::{play_match, MatchSpec};
-    let model = robot_model()?;
-    let config = sim::config::ArenaConfig::default();
     let spec = PlayerSpec::scripted("scripted").expect("built-in agent");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let budget = Duration::from_secs_f64(seconds);
@@ -215,15 +209,26 @@ fn agent_rates(seconds: f64) -> anyhow::Result<(f64, f64, f64)> {
 
 /// Training throughput for about `seconds` (at least two iterations), then the physics alone on the
 /// same number of environments for as long.
-pub fn train_rates(seconds: f64) -> anyhow::Result<serde_json::Value> {
+pub fn train_rates(
+    seconds: f64,
+    model: std::sync::Arc<sim::model::Model>,
+    arena: sim::config::ArenaConfig,
+) -> anyhow::Result<serde_json::Value> {
     use agents::ppo::trainer::Trainer;
     use agents::ppo::{Method, TrainConfig};
     use rayon::prelude::*;
     agents::ppo::fix_matmul_threads();
-    let model = robot_model()?;
     let config = TrainConfig::default();
     let envs = config.ppo.envs;
-    let mut t = Trainer::new(model.clone(), Method::Kmac, config, 1).map_err(anyhow::Error::msg)?;
+    let mut t = Trainer::on(
+        model.clone(),
+        arena.clone(),
+        "bench",
+        Method::Kmac,
+        config,
+        1,
+    )
+    .map_err(anyhow::Error::msg)?;
     // The first iteration warms caches and starts the segment; time the ones after it.
     t.iterate().map_err(anyhow::Error::msg)?;
     t.timing = Default::default();
@@ -236,7 +241,6 @@ pub fn train_rates(seconds: f64) -> anyhow::Result<serde_json::Value> {
     let wall = start.elapsed().as_secs_f64();
     let tm = t.timing;
     // The physics alone: the same environments, fixed controls (every muscle at 0.1), all cores.
-    let arena = sim::config::ArenaConfig::default();
     let mut worlds: Vec<sim::episode::SingleServe> = (0..envs)
         .map(|k| {
             let mut w = sim::episode::SingleServe::new(model.clone(), &arena, MYOCHALLENGE)
@@ -286,17 +290,25 @@ pub fn train_rates(seconds: f64) -> anyhow::Result<serde_json::Value> {
 
 /// Runs `rally bench`.
 pub fn run(args: &BenchArgs) -> Result<(), CliError> {
+    let robotless = matches!(args.target, Target::Ball | Target::Server | Target::Scale);
+    if robotless && args.model != "default" {
+        return Err(CliError::Usage(
+            "--model: only `robot`, `agents` and `train` measure a robot".into(),
+        ));
+    }
     match args.target {
         Target::Train => {
-            let r = train_rates(args.seconds)?;
+            let (model, config, _) = robot::bench_model(&args.model)?;
+            let mut r = train_rates(args.seconds, model, config)?;
+            r["model"] = args.model.clone().into();
             if args.json {
                 println!("{r}");
             } else {
                 let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
                 let s = |k: &str| 100.0 * r["share"][k].as_f64().unwrap_or(f64::NAN);
                 println!(
-                    "PPO training, K-MAC, {} environments, {} threads ({} iterations, {} control steps):",
-                    r["envs"], r["threads"], r["iterations"], r["env_steps"]
+                    "PPO training, K-MAC, model {}, {} environments, {} threads ({} iterations, {} control steps):",
+                    args.model, r["envs"], r["threads"], r["iterations"], r["env_steps"]
                 );
                 println!(
                     "  training       {:>9.0} env steps/s (rollout and update)",
@@ -435,14 +447,15 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
             Ok(())
         }
         Target::Agents => {
-            let (eps, rps, rally_s) = agent_rates(args.seconds)?;
+            let (model, config, _) = robot::bench_model(&args.model)?;
+            let (eps, rps, rally_s) = agent_rates(args.seconds, model, config)?;
             if args.json {
                 println!(
                     "{}",
-                    json!({"target": "agents", "episodes_per_second": eps, "rallies_per_second": rps, "simulated_seconds_per_rally": rally_s})
+                    json!({"target": "agents", "model": args.model, "episodes_per_second": eps, "rallies_per_second": rps, "simulated_seconds_per_rally": rally_s})
                 );
             } else {
-                println!("scripted agent, one core:");
+                println!("scripted agent, model {}, one core:", args.model);
                 println!("  evaluation    {eps:>8.1} single-serve episodes/s (P2)");
                 println!("  match         {rps:>8.1} rallies/s (scripted vs scripted, {rally_s:.2} simulated s per rally)");
             }
