@@ -24,7 +24,7 @@ STEPS_PER_SERVE = 1500
 
 
 def p2_serve(rng):
-    """MyoChallenge P2 sampling (DESIGN §4)."""
+    """MyoChallenge P2 sampling (docs/design.md §4)."""
     x, y, z = rng.uniform(-1.25, -0.8), rng.uniform(-0.5, 0.5), rng.uniform(1.4, 1.5)
     vz = rng.uniform(-0.1, 0.1)
     ax, ay = rng.uniform(0.5, 1.35), rng.uniform(-0.6, 0.7)

@@ -1,4 +1,4 @@
-//! Policy checkpoints (DESIGN §8): versioned JSON holding the controller (kind and gains — K-MAC's in
+//! Policy checkpoints (docs/design.md §8): versioned JSON holding the controller (kind and gains — K-MAC's in
 //! the paper's form), the observation spec and its normalisation, and the network: an MLP of any depth
 //! (elu, tanh, relu or linear layers) in `policy`, or — the second format — an ONNX model (observation
 //! batch → action batch, float32) embedded in base64 under `onnx` and run by tract. Loading validates

@@ -1,4 +1,4 @@
-//! The RL environments (paper §IV-B and §IV-C, DESIGN §6): the single-serve episode and the
+//! The RL environments (paper §IV-B and §IV-C, docs/design.md §6): the single-serve episode and the
 //! self-play rally, with the reward `w_g·r_g + w_c·r_c + w_s·r_s` and a reset/step API on actions in
 //! [−1, 1], observing through [`crate::observation`]. Deterministic per seed.
 
@@ -17,7 +17,7 @@ use crate::planner::Plan;
 
 type V3 = Vector3<f64>;
 
-/// The reward's terms (paper §IV-B; DESIGN §6): `r = w_g·r_g + w_c·r_c + w_s·r_s`, each a sum of named
+/// The reward's terms (paper §IV-B; docs/design.md §6): `r = w_g·r_g + w_c·r_c + w_s·r_s`, each a sum of named
 /// terms. One struct holds both a step's term values (each in [0, 1]) and their weights
 /// ([`RewardWeights`]), so a term is named once.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -61,7 +61,7 @@ pub struct RewardTerms {
     /// serve box (paper §IV-C).
     pub dual: f64,
     /// Effort (dense, ours; the official code has none): the step's mean muscle activation
-    /// `‖a‖₁/n_a`, the metric `rally eval` reports beside effort (DESIGN §7); a negative weight prices
+    /// `‖a‖₁/n_a`, the metric `rally eval` reports beside effort (docs/design.md §7); a negative weight prices
     /// activation. 0 unless weighted.
     #[serde(default)]
     pub effort: f64,
@@ -87,7 +87,7 @@ impl RewardTerms {
     }
 }
 
-/// The weights of the reward's terms; the defaults are the official code's (DESIGN §11) where it has
+/// The weights of the reward's terms; the defaults are the official code's (docs/design.md §11) where it has
 /// the term.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(transparent)]
@@ -133,7 +133,7 @@ pub fn grasp_term(robot: &Robot) -> f64 {
     (-20.0 * robot.paddle_offset()).exp()
 }
 
-/// The robot's mean muscle activation `‖a‖₁/n_a` (DESIGN §7's mean activation, one step).
+/// The robot's mean muscle activation `‖a‖₁/n_a` (docs/design.md §7's mean activation, one step).
 pub fn mean_activation(robot: &Robot) -> f64 {
     let (sum, n) = robot
         .model()
@@ -268,7 +268,7 @@ impl StrokeReward {
     }
 }
 
-/// How a single-serve episode ends for training (DESIGN §11): the official code ends it
+/// How a single-serve episode ends for training (docs/design.md §11): the official code ends it
 /// `TASK_DELAY_STEPS` after the ball left the paddle and `MISS_GRACE` after the planned strike
 /// without contact, besides the rules; evaluation plays every episode to its rules' end.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

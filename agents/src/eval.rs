@@ -1,4 +1,4 @@
-//! Evaluation in the single-serve environment (paper §V-B, DESIGN §7): hit rate, success rate,
+//! Evaluation in the single-serve environment (paper §V-B, docs/design.md §7): hit rate, success rate,
 //! effort and mean activation over seeded episodes, each with a 95% interval. Episodes run in
 //! parallel (rayon), each with its own seeds derived from the evaluation seed and its index, and are
 //! aggregated in index order, so the numbers depend only on the seed — never on the thread count.
@@ -33,7 +33,7 @@ pub struct EpisodeResult {
     pub activation_to_contact: f64,
     /// Mean ‖a‖₁ / n_a over the steps after the first paddle contact (none without a contact or
     /// when the episode ends on it): play no training episode reaches, as training episodes end
-    /// 3 steps after the ball leaves the paddle (DESIGN §11).
+    /// 3 steps after the ball leaves the paddle (docs/design.md §11).
     pub activation_after_contact: Option<f64>,
     /// Control steps played.
     pub steps: usize,

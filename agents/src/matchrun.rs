@@ -1,4 +1,4 @@
-//! The match runner (DESIGN §7–8): two players, `n` rallies with alternating servers in the dual arena,
+//! The match runner (docs/design.md §7–8): two players, `n` rallies with alternating servers in the dual arena,
 //! each rally's length, server, end and failing side, every hitting-plane crossing, the trajectory
 //! drift statistics, and a replay at 50 Hz. A match is a deterministic function of (simulator version,
 //! preset, players, seed): same inputs, same bytes.
@@ -97,7 +97,7 @@ pub struct Moments {
     pub cov: [[f64; 2]; 2],
 }
 
-/// Trajectory drift statistics (DESIGN §7).
+/// Trajectory drift statistics (docs/design.md §7).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DriftStats {
     /// Crossings counted.

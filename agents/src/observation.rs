@@ -1,4 +1,4 @@
-//! What a policy sees (DESIGN §6): the observation blocks a checkpoint lists and the `Observer` that
+//! What a policy sees (docs/design.md §6): the observation blocks a checkpoint lists and the `Observer` that
 //! builds them for one robot from the raw state `sim` exposes, keeping the planner's command (strike
 //! point, racket velocity and orientation, time to the strike). Training and playing read the same
 //! observation through this module.

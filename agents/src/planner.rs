@@ -1,4 +1,4 @@
-//! The paper's physics-based planner (§IV-B, DESIGN §6): from the ball's state, where and when it will
+//! The paper's physics-based planner (§IV-B, docs/design.md §6): from the ball's state, where and when it will
 //! cross the receiver's hitting plane (drag-free flight and the table bounce of `sim::predict`), an
 //! outgoing velocity from the return sampler (or one given), and the racket command — velocity
 //! `v̂_r = ((v_o·u + C_r·v_i·u)/(1 + C_r))·u` and orientation taking the blade normal to

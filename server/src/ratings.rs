@@ -1,4 +1,4 @@
-//! Ratings (DESIGN §8): Bradley–Terry over points, fitted by the MM algorithm (Hunter 2004) with a
+//! Ratings (docs/design.md §8): Bradley–Terry over points, fitted by the MM algorithm (Hunter 2004) with a
 //! weak prior — every agent is credited one point won and one lost against a virtual anchor of
 //! strength 1 — and reported on the Elo scale, `1500 + 400·log10 γ`, so the anchor sits at 1500.
 //! 95% intervals come from a seeded bootstrap over matches (deterministic: the same matches give the

@@ -240,7 +240,7 @@ pub struct AgentCrossings {
     pub crossings: Vec<db::AgentCrossing>,
 }
 
-/// The serve box at the hitting plane (DESIGN §7), m.
+/// The serve box at the hitting plane (docs/design.md §7), m.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ServeBox {
     /// |y| at most.
@@ -289,7 +289,7 @@ pub struct SideDrift {
     pub side: String,
     /// Its agent.
     pub agent_id: i64,
-    /// The statistics (DESIGN §7).
+    /// The statistics (docs/design.md §7).
     pub drift: Value,
 }
 

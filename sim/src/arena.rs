@@ -1,7 +1,7 @@
-//! The arena's numbers, each named once with its unit and source (DESIGN §3–4).
+//! The arena's numbers, each named once with its unit and source (docs/design.md §3–4).
 //!
 //! The default arena is the MyoChallenge 2025 table-tennis scene (MyoSuite 3.0, compiled by MuJoCo
-//! 4.0; `shared/reference/myosuite_tt_ball_only.xml` holds the same numbers). Nothing here is
+//! 4.0; `sim/tests/fixtures/myosuite_tt_ball_only.xml` holds the same numbers). Nothing here is
 //! mutable: a [`Preset`] selects the contact laws and their coefficients.
 
 use nalgebra::Vector3;
@@ -33,7 +33,7 @@ pub const BALL_INERTIA: f64 = 2.0 / 3.0 * BALL_MASS * BALL_RADIUS * BALL_RADIUS;
 pub const TABLE_TOP_Z: f64 = 0.795;
 /// Table half-length along x, m (two 0.685-long halves: x ∈ [−1.37, 1.37]).
 pub const TABLE_HALF_LENGTH: f64 = 1.37;
-/// The table's centre line, m: MyoSuite's table is offset from y = 0 (DESIGN §3).
+/// The table's centre line, m: MyoSuite's table is offset from y = 0 (docs/design.md §3).
 pub const TABLE_CENTER_Y: f64 = 0.04;
 /// Table half-width across, m (MyoSuite box half-width 0.76, centred at `TABLE_CENTER_Y`).
 pub const TABLE_HALF_WIDTH: f64 = 0.76;
@@ -62,7 +62,7 @@ pub const SERVE_BOX_Z: (f64, f64) = (1.1, 1.35);
 /// Serve box on the hitting plane: `|y_r| < 0.7`, m, in the receiver frame.
 pub const SERVE_BOX_HALF_WIDTH: f64 = 0.7;
 
-/// The two sides of the table. A is x > 0, B is x < 0 (DESIGN §3), absolute in the world frame.
+/// The two sides of the table. A is x > 0, B is x < 0 (docs/design.md §3), absolute in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Side {
@@ -111,7 +111,7 @@ impl Side {
         }
     }
 
-    /// `(y_r, z)` of a world point in this receiver's frame (DESIGN §3): `y_r = ±(y − 0.04)`.
+    /// `(y_r, z)` of a world point in this receiver's frame (docs/design.md §3): `y_r = ±(y − 0.04)`.
     pub fn receiver_frame(self, p: &Vector3<f64>) -> (f64, f64) {
         (self.sign() * (p.y - TABLE_CENTER_Y), p.z)
     }

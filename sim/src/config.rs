@@ -11,7 +11,7 @@ pub const MYOCHALLENGE_ARENA_TOML: &str = include_str!("../../config/myochalleng
 /// The shipped robot, `config/models/upper_body.xml`.
 pub const DEFAULT_MODEL_XML: &str = include_str!("../../config/models/upper_body.xml");
 
-/// Grip constants (DESIGN §5), as `[grip]` in `config/arena.toml` documents them.
+/// Grip constants (docs/design.md §5), as `[grip]` in `config/arena.toml` documents them.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GripParams {

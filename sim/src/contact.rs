@@ -3,7 +3,7 @@
 //!
 //! Pure functions of the ball state and the contact geometry; the ball world decides when to call
 //! them. Neither law here can ever add energy in the frame of the surface it acts against, except
-//! the soft contact's discretisation (DESIGN §4: up to ~3%, as MuJoCo's).
+//! the soft contact's discretisation (docs/design.md §4: up to ~3%, as MuJoCo's).
 
 use nalgebra::Vector3;
 

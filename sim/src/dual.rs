@@ -1,4 +1,4 @@
-//! The dual arena (DESIGN §3): two robots and the ball world. Robot A stands at x > 0; robot B is the
+//! The dual arena (docs/design.md §3): two robots and the ball world. Robot A stands at x > 0; robot B is the
 //! same model turned 180° about the vertical line through (0, 0.04). Each physics step moves both
 //! robots (muscles, joints, grip), then the ball against both paddles, then hands each paddle the
 //! ball's impulse for the next step. The episode and rally state machines (issue 4) build on this.

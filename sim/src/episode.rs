@@ -1,11 +1,11 @@
-//! The paper's two environments as state machines over the physics (DESIGN §4, paper §V-A):
+//! The paper's two environments as state machines over the physics (docs/design.md §4, paper §V-A):
 //!
 //! - [`SingleServe`]: a MyoChallenge serve (P0/P1/P2) to robot A; 300 control steps at 100 Hz, ending
 //!   early on the rules — a legal return (success), or the first failure.
 //! - [`Rally`]: the dual arena; the paper's heuristic serve from the server's hitting plane, then
 //!   play until the first failure, or CAPPED after `rally.cap` legal returns or `rally.max_seconds`.
 //!   Every incoming ball's crossing of its receiver's hitting plane is recorded for the drift
-//!   statistics (DESIGN §7).
+//!   statistics (docs/design.md §7).
 //!
 //! Whoever drives the robots sets their controls before each [`SingleServe::step`] / [`Rally::step`].
 //! No I/O; randomness only from the caller's [`Rng`].
@@ -210,7 +210,7 @@ pub struct Crossing {
     pub receiver: Side,
     /// 0 for the serve, then 1, 2, … for each return.
     pub exchange: u32,
-    /// Receiver-frame lateral position, m (DESIGN §3).
+    /// Receiver-frame lateral position, m (docs/design.md §3).
     pub y_r: f64,
     /// Height, m.
     pub z: f64,

@@ -46,7 +46,7 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    /// The table as one solid box from below the floor to the playing surface (DESIGN §4).
+    /// The table as one solid box from below the floor to the playing surface (docs/design.md §4).
     pub fn table() -> Aabb {
         Aabb {
             center: V3::new(0.0, arena::TABLE_CENTER_Y, 0.0),
@@ -58,7 +58,7 @@ impl Aabb {
         }
     }
 
-    /// The net box (DESIGN §4).
+    /// The net box (docs/design.md §4).
     pub fn net() -> Aabb {
         Aabb {
             center: V3::from(arena::NET_CENTER),
@@ -213,7 +213,7 @@ impl Cylinder {
     }
 }
 
-/// The paddle's collision shape in its own frame: blade and handle (DESIGN §4).
+/// The paddle's collision shape in its own frame: blade and handle (docs/design.md §4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PaddleShape {
     /// The blade; its axis (normal) is the paddle frame's z.

@@ -1,4 +1,4 @@
-//! MuJoCo's Hill-type muscle (DESIGN §5): the active force–length and force–velocity curves, the
+//! MuJoCo's Hill-type muscle (docs/design.md §5): the active force–length and force–velocity curves, the
 //! passive force, and the activation dynamics, as `mju_muscleGain`, `mju_muscleBias` and
 //! `mju_muscleDynamics` in MuJoCo's `engine_util_misc.c` define them. Pure functions of their
 //! arguments.

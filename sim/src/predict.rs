@@ -1,4 +1,4 @@
-//! Ballistic prediction (paper §IV-B, DESIGN §6): drag-free flight and an instantaneous table bounce
+//! Ballistic prediction (paper §IV-B, docs/design.md §6): drag-free flight and an instantaneous table bounce
 //! `v⁺ = diag(C_h, C_h, −C_v)·v⁻`, the landing point, the crossing of a hitting plane, and the
 //! return sampler that both the planner and the rally server draw outgoing velocities from.
 //!
@@ -229,7 +229,7 @@ pub fn return_is_in_box(hitter: Side, crossing: &Option<PlaneCrossing>) -> bool 
     c.bounces == 1 && Side::of_x(b.pos.x) == receiver && arena::in_serve_box(y_r, z)
 }
 
-/// Draws one outgoing velocity for a ball struck at `strike` by `hitter` (DESIGN §6): `v_z` uniform in
+/// Draws one outgoing velocity for a ball struck at `strike` by `hitter` (docs/design.md §6): `v_z` uniform in
 /// [`RETURN_VZ`], the flight time down to the table, then `v_x`, `v_y` uniform in the bounds that land
 /// in the target area and clear the net by the margin.
 fn draw_return(rng: &mut Rng, strike: &V3, hitter: Side, model: &BounceModel) -> V3 {

@@ -1,5 +1,5 @@
 //! One robot in the arena: its musculoskeletal model and state, the paddle in its hand and the grip
-//! that holds it (DESIGN §5), placed on side A or, turned about (0, 0.04), on side B.
+//! that holds it (docs/design.md §5), placed on side A or, turned about (0, 0.04), on side B.
 //!
 //! The grip: each physics step, the force and torque the hand must exert to keep the paddle at its
 //! nominal pose in the hand (its weight, its acceleration, the ball's impulse spread over the step) are

@@ -1,4 +1,4 @@
-//! The rules of a legal return (DESIGN §4; MyoChallenge's `evaluate_pingpong_trajectory`, extended
+//! The rules of a legal return (docs/design.md §4; MyoChallenge's `evaluate_pingpong_trajectory`, extended
 //! to rallies of any length). A [`Referee`] follows one rally from the serve: it is fed the contact
 //! events in time order, the ball's height, and failures reported from outside (a dropped paddle, an
 //! invalid action), and it calls hits, legal returns and the end of the rally.

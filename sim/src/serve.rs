@@ -1,4 +1,4 @@
-//! Serve generators (DESIGN §4): MyoChallenge's P0, P1 and P2 launcher serves to side A, and the
+//! Serve generators (docs/design.md §4): MyoChallenge's P0, P1 and P2 launcher serves to side A, and the
 //! paper's heuristic rally serve from either hitting plane. Seeded by the caller's [`Rng`]; the order
 //! of draws is part of the contract (changing it changes every seeded match: bump `SIM_VERSION`).
 

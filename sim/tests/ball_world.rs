@@ -101,7 +101,7 @@ fn bounce_ratios(preset: Preset, vx: f64) -> (f64, f64) {
 #[test]
 fn bounce_ratios_per_preset() {
     // myochallenge: MuJoCo's soft contact keeps ≈ 0.99–1.03 of the vertical speed (its Euler
-    // discretisation can gain a little) and ≈ 0.995 of the horizontal speed (DESIGN §4).
+    // discretisation can gain a little) and ≈ 0.995 of the horizontal speed (docs/design.md §4).
     let (cv, ch) = bounce_ratios(MYOCHALLENGE, 3.0);
     assert!(
         (0.97..=1.035).contains(&cv),

@@ -2,7 +2,7 @@
 //! `fixtures/README.md`). Each serve starts from the recorded state at t = 0 and flies, bounces once
 //! on side A's half and flies on; we compare every 10 ms row.
 //!
-//! Acceptance (issue 2, DESIGN §4): the path through the bounce within 2 cm of MuJoCo's, and the
+//! Acceptance (issue 2, docs/design.md §4): the path through the bounce within 2 cm of MuJoCo's, and the
 //! velocity after the bounce within 3%.
 
 use nalgebra::Vector3;

@@ -148,7 +148,7 @@ fn rally_section(
          the heuristic rally serve). A rally's length is its legal returns (the serve is not one). A geometric \
          rally with per-stroke success p has mean p/(1−p): the column *implied p* inverts that. The drift slope is \
          the least-squares slope over exchange index of the energy distance between the serves' and the returns' \
-         crossings of the receiver's hitting plane (DESIGN §7). The paper's record: 14 consecutive exchanges.\n",
+         crossings of the receiver's hitting plane (docs/design.md §7). The paper's record: 14 consecutive exchanges.\n",
         args.rallies, args.seed
     );
     let _ = writeln!(
@@ -413,7 +413,7 @@ fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf>) -> Strin
     let _ = writeln!(
         s,
         "Every method is trained from scratch with the same PPO, reward, network and hyperparameters \
-         (`config/train.toml`); only the action space differs (DESIGN §6). Effort is MyoSuite's \
+         (`config/train.toml`); only the action space differs (docs/design.md §6). Effort is MyoSuite's \
          mean ‖a‖₂/n_a (comparable only at equal muscle counts: ours has 75 muscles, the paper's model \
          more); mean activation ‖a‖₁/n_a is comparable across models.\n"
     );

@@ -1,5 +1,5 @@
 //! `rally worker`: a match-playing process without the HTTP server, for tournaments larger than one
-//! machine's workers (DESIGN §12; the loop is `server::scheduler`'s).
+//! machine's workers (docs/design.md §12; the loop is `server::scheduler`'s).
 
 use std::path::PathBuf;
 

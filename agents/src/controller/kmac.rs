@@ -1,4 +1,4 @@
-//! K-MAC, the paper's Kinematics-based Muscle Actuation Controller (DESIGN §6): target joint
+//! K-MAC, the paper's Kinematics-based Muscle Actuation Controller (docs/design.md §6): target joint
 //! positions → muscle lengths by forward kinematics → length PD → activation → control; and the
 //! gravity feed-forward for callers that hold postures.
 
@@ -9,7 +9,7 @@ use sim::muscle;
 
 use super::*;
 
-/// Steps 2–5 of K-MAC for one muscle (DESIGN §6): PD force on length, clipped to pulling, the
+/// Steps 2–5 of K-MAC for one muscle (docs/design.md §6): PD force on length, clipped to pulling, the
 /// activation that produces it with the simulator's own gain and bias (gain limited to ≤ −1 N), and
 /// the control that reaches that activation in one control step `dt` by inverting the activation
 /// dynamics.

@@ -1,4 +1,4 @@
-//! From a policy's action to muscle controls (DESIGN §6): K-MAC (the paper's Diff-Muscle: target
+//! From a policy's action to muscle controls (docs/design.md §6): K-MAC (the paper's Diff-Muscle: target
 //! joint positions), Muscle-PD (MuscleVAE-style: target muscle lengths), Direct (Muscle-PPO: the
 //! controls themselves) and DynSyn (synergy groups plus per-muscle weights). Every controller also
 //! sets the two pelvis position servos.

@@ -1,4 +1,4 @@
-//! PPO's losses on candle tensors, with rsl_rl's definitions (DESIGN §11): the diagonal Gaussian's
+//! PPO's losses on candle tensors, with rsl_rl's definitions (docs/design.md §11): the diagonal Gaussian's
 //! log-density and entropy, the clipped surrogate, the clipped value loss and the KL divergence
 //! between the rollout's policy and the current one (which drives the adaptive learning rate).
 //! Autodiff is candle's; these functions only write the formulas.

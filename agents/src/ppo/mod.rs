@@ -1,4 +1,4 @@
-//! PPO (Schulman et al. 2017) with rsl_rl's semantics (DESIGN §11), on candle: GAE, the clipped
+//! PPO (Schulman et al. 2017) with rsl_rl's semantics (docs/design.md §11), on candle: GAE, the clipped
 //! surrogate and value losses, an entropy bonus, Adam with gradient-norm clipping, per-minibatch
 //! advantage normalisation, empirical observation normalisation, a Gaussian policy with a learned
 //! σ and the adaptive-KL learning rate. Environments step in parallel (rayon) and the policy runs
@@ -42,7 +42,7 @@ use crate::controller::{ControllerSpec, PdGains, Synergies};
 use crate::env::RewardWeights;
 
 /// Which of the paper's methods a run trains: the same PPO, reward and network, another action
-/// space (DESIGN §6).
+/// space (docs/design.md §6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
@@ -118,7 +118,7 @@ pub enum Schedule {
     Adaptive,
 }
 
-/// PPO's hyperparameters. The official code's values (DESIGN §11) are in the comments where ours
+/// PPO's hyperparameters. The official code's values (docs/design.md §11) are in the comments where ours
 /// differ; `config/train.toml` carries the same with both.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -133,7 +133,8 @@ pub struct PpoConfig {
     pub minibatches: usize,
     /// Initial learning rate (official 5e-4).
     pub learning_rate: f64,
-    /// Learning-rate schedule (official: adaptive in effect).
+    /// Learning-rate schedule (the official config names `linear_decay`, not implemented here;
+    /// docs/design.md §11).
     pub schedule: Schedule,
     /// KL target of the adaptive schedule (official 0.01).
     pub desired_kl: f64,

@@ -1,4 +1,4 @@
-//! Workers and leases (DESIGN §12, migration 0004): who plays which running match, until when.
+//! Workers and leases (docs/design.md §12, migration 0004): who plays which running match, until when.
 //!
 //! A claim takes the oldest queued match and gives it a lease: the claiming worker's name, an expiry
 //! and the claim's number (`attempts`, one more than the last claim's). The worker's heartbeat

@@ -1,4 +1,4 @@
-//! `rally bench scale`: what scale-out costs and gives (DESIGN §12), on the embedded SQLite and, given
+//! `rally bench scale`: what scale-out costs and gives (docs/design.md §12), on the embedded SQLite and, given
 //! a PostgreSQL server (`--postgres`), on PostgreSQL in the same run — per engine: the store's
 //! overhead per match (claim, then store a played result under the lease), matches per hour with
 //! the server's own worker and with 1, 2 and 4 `rally worker` processes, and the leaderboard's
