@@ -18,7 +18,7 @@ use super::CliError;
                   it reports after that is refused: no match is lost or stored twice. SIGTERM or Ctrl-C\n\
                   finishes and stores the matches being played, then exits.\n\n\
                   The database is the server's (every process on one SQLite file must run on one machine).\n\
-                  Settings come from the config file as for `rally serve` (lease_s, the model); --db,\n\
+                  Settings come from the config file as for `rally serve` (lease_s among them); --db,\n\
                   --workers and --name override it. The first stdout line is `worker NAME ready`.\n\n\
                   Example (an API server and two workers on one machine):\n  \
                   rally serve --workers 0 --db data/rally.db &\n  \
