@@ -279,7 +279,7 @@ fn a_warm_start_carries_the_optimiser_so_its_first_update_stays_near_the_start()
     // same iteration moves the policy far further.
     let run = RunDir::open(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../runs/kmac"
+        "/tests/fixtures/runs/kmac"
     )))
     .unwrap();
     let saved = run.read_state().unwrap();
@@ -338,13 +338,13 @@ fn validation_plays_and_keeps_the_policy_at_its_noise_scale() {
 
 #[test]
 fn the_bound_loss_pulls_pinned_means_back_towards_the_bound() {
-    // The rally built-in's source (runs/kmac-bank2/init) has means far past ±1 on several joints
+    // The rally built-in's source (tests/fixtures/runs/kmac-bank2-init) has means far past ±1 on several joints
     // (their samples almost always clip, so the surrogate gives them no gradient). Four iterations
     // with the bound loss (a fresh optimiser, as the rally fine-tunings start) bring them part of the
     // way in; without it, they stay about where they were.
     let run = RunDir::open(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../runs/kmac-bank2/init"
+        "/tests/fixtures/runs/kmac-bank2-init"
     )))
     .unwrap();
     let mut cfg = TrainConfig::default();

@@ -39,7 +39,8 @@ fn dual_per_episode(t: &mut Trainer, iterations: usize) -> (f64, usize) {
 #[test]
 fn the_serve_box_term_is_paid_once_the_policy_returns_balls() {
     // 16 rallies × 96 control steps × 2 robots per iteration, 4 iterations, from the untrained
-    // policy and from the committed Diff-Muscle run (runs/kmac, single serves only).
+    // policy and from the Diff-Muscle built-in's run (single serves only; its resume state is in
+    // tests/fixtures/runs/kmac).
     let cfg = rally_config(16, 96, 100);
     let m = model();
     let mut cold = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 5).unwrap();
@@ -48,11 +49,11 @@ fn the_serve_box_term_is_paid_once_the_policy_returns_balls() {
     let mut warm = Trainer::new(m, Method::Kmac, cfg, 5).unwrap();
     let run = RunDir::open(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../runs/kmac"
+        "/tests/fixtures/runs/kmac"
     )))
     .unwrap();
     run.warm_start(&mut warm, WarmOptimiser::Carry)
-        .expect("runs/kmac warm-starts a rally run");
+        .expect("the Diff-Muscle run warm-starts a rally run");
     assert!(warm.progress.warm_start.is_some());
     let (warm_dual, warm_n) = dual_per_episode(&mut warm, 4);
     let row = warm.progress.curve.last().unwrap();
@@ -89,8 +90,8 @@ fn weight_bits(t: &Trainer) -> Vec<u32> {
 
 #[test]
 fn validation_scores_the_policy_and_leaves_the_run_unchanged() {
-    // Two runs warm-started from the committed rally run, one validated after every iteration: the
-    // same weights after three iterations. The validation plays the policy as a checkpoint would
+    // Two runs warm-started from the rally built-in's starting point, one validated after every
+    // iteration: the same weights after three iterations. The validation plays the policy as a checkpoint would
     // (self-play rallies on the validation seed): the warm policy returns balls, the untrained one
     // does not, and its score is the mean rally length those rallies give.
     let mut cfg = rally_config(4, 16, 100);
@@ -99,7 +100,7 @@ fn validation_scores_the_policy_and_leaves_the_run_unchanged() {
     let m = model();
     let run = RunDir::open(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../runs/kmac-rally"
+        "/tests/fixtures/runs/kmac-bank2-init"
     )))
     .unwrap();
     let warm = |seed| {

@@ -308,7 +308,7 @@ impl Default for ControllerConfig {
 }
 
 /// Which checkpoint a run keeps besides its last (ours; rsl_rl keeps only the last). Rally training
-/// peaks and then degrades (runs/kmac-rally-continued: training rally length 0.92 at 1.1 M steps,
+/// peaks and then degrades (docs/runs/kmac-rally-continued: training rally length 0.92 at 1.1 M steps,
 /// 0.49 at 5 M), so every `every` iterations the policy as it would play in a match (its trained
 /// Gaussian, seeded) plays held-out episodes: self-play rallies in the rally environment (score: the
 /// mean rally length), single serves of the training distribution otherwise (score: the success
