@@ -53,8 +53,11 @@ fn bad_match_arguments_exit_2() {
 }
 
 #[test]
-fn committed_checkpoints_play_by_name() {
+fn committed_checkpoints_play_by_name_from_any_directory() {
+    // From a directory that has no config/: the built-ins are compiled into the binary.
+    let elsewhere = std::env::temp_dir();
     let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .current_dir(&elsewhere)
         .args([
             "match",
             "kmac",
@@ -75,13 +78,15 @@ fn committed_checkpoints_play_by_name() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["a"], "kmac");
     let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .current_dir(&elsewhere)
         .args(["match", "no-such-agent", "scripted"])
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("config/checkpoints/no-such-agent.json"),
+        err.contains("'no-such-agent' is neither a scripted agent")
+            && err.contains("a built-in checkpoint (dynsyn, kmac, kmac-rally"),
         "{err}"
     );
 }

@@ -1,6 +1,6 @@
 //! The player factory: `PlayerSpec`, a recipe for a player that can be sent to worker threads — a
-//! scripted variant by name, a committed checkpoint by name (`config/checkpoints/NAME.json`) or a
-//! checkpoint file — and the count of players built.
+//! scripted variant by name, a built-in checkpoint by name ([`crate::builtins`]) or a checkpoint
+//! file — and the count of players built.
 
 use sim::arena::Preset;
 use sim::model::Model;
@@ -8,10 +8,6 @@ use sim::predict::BounceModel;
 
 use crate::player::Player;
 use crate::scripted::{Scripted, ScriptedParams};
-
-/// Where the committed checkpoints live, relative to the repository root (`rally match kmac
-/// kmac-rally` finds `config/checkpoints/kmac.json` and `config/checkpoints/kmac-rally.json`).
-pub const COMMITTED_CHECKPOINTS: &str = "config/checkpoints";
 
 static PLAYERS_BUILT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
@@ -36,7 +32,9 @@ pub enum PlayerSpec {
 }
 
 impl PlayerSpec {
-    /// A scripted variant's name, or else a checkpoint file to read (through `read`) and validate.
+    /// A scripted variant's name, a built-in checkpoint's name (`kmac`, `kmac-rally`, …: compiled
+    /// into the binary, found from any directory), or else a checkpoint file to read (through
+    /// `read`) and validate.
     pub fn resolve(
         name: &str,
         model: &Model,
@@ -45,21 +43,20 @@ impl PlayerSpec {
         if let Some(s) = PlayerSpec::scripted(name) {
             return Ok(s);
         }
-        // A bare name is also a committed checkpoint's: config/checkpoints/NAME.json.
-        let committed = format!("{COMMITTED_CHECKPOINTS}/{name}.json");
-        let bare = !name.contains(['/', '\\']) && !name.ends_with(".json");
-        let text = read(name)
-            .or_else(|e| if bare { read(&committed).map_err(|_| e) } else { Err(e) })
-            .map_err(|e| {
-            let names: Vec<&str> = crate::scripted::variants()
-                .iter()
-                .map(|(n, _)| *n)
-                .collect();
-            format!(
-                "'{name}' is neither a scripted agent ({}), a committed checkpoint ({COMMITTED_CHECKPOINTS}/{name}.json) nor a readable checkpoint file: {e}",
-                names.join(", ")
-            )
-        })?;
+        let text = match crate::builtins::checkpoint(name) {
+            Some(text) => text.to_string(),
+            None => read(name).map_err(|e| {
+                let scripted: Vec<&str> = crate::scripted::variants()
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect();
+                format!(
+                    "'{name}' is neither a scripted agent ({}), a built-in checkpoint ({}) nor a readable checkpoint file: {e}",
+                    scripted.join(", "),
+                    crate::builtins::names().join(", ")
+                )
+            })?,
+        };
         let c = crate::checkpoint::Checkpoint::from_json(&text, model)
             .map_err(|e| format!("checkpoint {name}: {e}"))?;
         Ok(PlayerSpec::Checkpoint(std::sync::Arc::new(c)))

@@ -15,6 +15,7 @@
 //! Depends on `sim` only.
 #![forbid(unsafe_code)]
 
+pub mod builtins;
 pub mod checkpoint;
 pub mod controller;
 pub mod env;

@@ -77,3 +77,32 @@ fn a_rally_match_between_committed_checkpoints_is_bit_identical_per_seed() {
     let (r3, _) = play(32);
     assert_ne!(r1.rallies, r3.rallies, "another seed, another match");
 }
+
+#[test]
+fn the_binary_carries_every_committed_checkpoint_as_committed() {
+    // `agents::builtins` is how `rally` finds a built-in from any directory: it must list every file
+    // of config/checkpoints/, each with the file's text.
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/checkpoints");
+    let mut on_disk: Vec<(String, String)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .map(|p| {
+            let name = p.file_stem().unwrap().to_string_lossy().to_string();
+            (name, std::fs::read_to_string(&p).unwrap())
+        })
+        .collect();
+    on_disk.sort();
+    let embedded: Vec<(String, String)> = agents::builtins::CHECKPOINTS
+        .iter()
+        .map(|(n, t)| (n.to_string(), t.to_string()))
+        .collect();
+    assert_eq!(
+        embedded.iter().map(|(n, _)| n).collect::<Vec<_>>(),
+        on_disk.iter().map(|(n, _)| n).collect::<Vec<_>>(),
+        "agents/src/builtins.rs lists config/checkpoints/ (sorted)"
+    );
+    for ((name, a), (_, b)) in embedded.iter().zip(&on_disk) {
+        assert!(a == b, "{name}: the embedded copy differs from the file");
+    }
+}

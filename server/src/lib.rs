@@ -1,9 +1,9 @@
 //! # server — the tournament service
 //!
-//! An axum service on SQLite (sqlx, `migrations/` applied at start): agents (built-in scripted ones
-//! registered on first start), matches queued over REST and played by a bounded pool of workers off
-//! the async runtime, rallies, crossings and replays stored, Bradley–Terry ratings on a leaderboard,
-//! and an HTML page. See `scheduler.rs` for a match's lifecycle.
+//! An axum service on SQLite or PostgreSQL (sqlx, `migrations/` applied at start): agents (the
+//! built-ins registered on first start), matches queued over REST and played by a bounded pool of
+//! workers off the async runtime, rallies, crossings and replays stored, Bradley–Terry ratings on a
+//! leaderboard, and an HTML page. See `scheduler.rs` for a match's lifecycle.
 //!
 //! Must never: simulate physics or run policies itself (it calls `agents`' match runner), or block the
 //! async runtime with a match.
@@ -13,6 +13,7 @@ pub mod api;
 pub mod board;
 pub mod db;
 pub mod domain;
+pub mod edge;
 pub mod page;
 pub mod ratings;
 pub mod replay;
@@ -75,8 +76,10 @@ pub struct Settings {
     /// `qualification_episodes` episodes); the admin token is not limited.
     #[serde(default = "default_agents_per_hour")]
     pub max_agents_per_hour: u32,
-    /// Directory of checkpoints (`NAME.json`) registered as built-in agents on start, qualified like
-    /// submissions; empty: none. A file that does not load is skipped with a warning.
+    /// The checkpoints registered as built-in agents on start, qualified like submissions:
+    /// [`EMBEDDED_BUILTINS`] (the default) for those compiled into the binary, whatever directory
+    /// it starts in; else a directory of `NAME.json` files; empty: none. One that does not load is
+    /// skipped with a warning.
     #[serde(default = "default_builtin_checkpoints")]
     pub builtin_checkpoints: PathBuf,
     /// How long a running match's lease lasts without a heartbeat, s: a worker that died or lost
@@ -84,6 +87,17 @@ pub struct Settings {
     /// every quarter of it.
     #[serde(default = "default_lease_s")]
     pub lease_s: f64,
+    /// HTTP connections open at once; more wait in the kernel's backlog.
+    #[serde(default = "default_max_connections")]
+    pub max_connections: usize,
+    /// How long a client may take to send a request's headers, s (also the longest a keep-alive
+    /// connection waits idle for its next request): past it, the connection is closed.
+    #[serde(default = "default_header_read_timeout_s")]
+    pub header_read_timeout_s: f64,
+    /// How long a shutdown (SIGTERM, Ctrl-C) waits for open HTTP connections (live streams, slow
+    /// clients) before closing them, s. Running matches are finished and stored either way.
+    #[serde(default = "default_shutdown_deadline_s")]
+    pub shutdown_deadline_s: f64,
     /// This process's worker name in the `workers` table and the matches it plays; empty:
     /// `HOST:PID`.
     #[serde(default)]
@@ -96,6 +110,18 @@ fn default_self_play_every() -> u32 {
 
 fn default_lease_s() -> f64 {
     20.0
+}
+
+fn default_max_connections() -> usize {
+    1024
+}
+
+fn default_header_read_timeout_s() -> f64 {
+    10.0
+}
+
+fn default_shutdown_deadline_s() -> f64 {
+    10.0
 }
 
 impl Settings {
@@ -124,8 +150,12 @@ pub fn hostname() -> String {
         .unwrap_or_else(|| "localhost".into())
 }
 
+/// `builtin_checkpoints = "embedded"`: the checkpoints compiled into the binary
+/// ([`agents::builtins`]).
+pub const EMBEDDED_BUILTINS: &str = "embedded";
+
 fn default_builtin_checkpoints() -> PathBuf {
-    PathBuf::from("config/checkpoints")
+    PathBuf::from(EMBEDDED_BUILTINS)
 }
 
 fn default_agents_per_hour() -> u32 {
@@ -149,6 +179,19 @@ impl Settings {
         }
         if !(s.lease_s.is_finite() && s.lease_s >= 1.0) {
             return Err("lease_s must be at least 1 second".into());
+        }
+        if s.max_connections == 0 {
+            return Err("max_connections must be positive".into());
+        }
+        for (name, v) in [
+            ("header_read_timeout_s", s.header_read_timeout_s),
+            ("shutdown_deadline_s", s.shutdown_deadline_s),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 86_400.0) {
+                return Err(format!(
+                    "{name} must be a positive number of seconds (at most a day)"
+                ));
+            }
         }
         if s.max_rallies == 0 || s.continuous_rallies == 0 || s.continuous_rallies > s.max_rallies {
             return Err("max_rallies and continuous_rallies must be positive, continuous_rallies ≤ max_rallies".into());
@@ -299,12 +342,18 @@ pub async fn serve(settings: Settings, on_ready: impl FnOnce(SocketAddr)) -> any
     on_ready(addr);
     let background = scheduler::spawn_background(state.clone(), shutdown.clone());
     let app = api::router(state.clone());
-    axum::serve(listener, app)
-        .with_graceful_shutdown(async move {
-            shutdown_signal().await;
-            shutdown.notify_waiters();
-        })
-        .await?;
+    let limits = edge::Limits {
+        max_connections: state.settings.max_connections,
+        header_read_timeout: std::time::Duration::from_secs_f64(
+            state.settings.header_read_timeout_s,
+        ),
+        shutdown_deadline: std::time::Duration::from_secs_f64(state.settings.shutdown_deadline_s),
+    };
+    edge::serve(listener, app, limits, async move {
+        shutdown_signal().await;
+        shutdown.notify_waiters();
+    })
+    .await?;
     workers.join(&state).await;
     for b in background {
         b.abort();
@@ -392,59 +441,73 @@ pub async fn qualify(
         .map_err(|e| anyhow::anyhow!("qualification panicked: {e}"))
 }
 
-/// Registers every checkpoint in `settings.builtin_checkpoints` that is not an agent yet, as a
+/// Registers every checkpoint `settings.builtin_checkpoints` names that is not an agent yet, as a
 /// built-in agent named after its file, qualified like a submission. A checkpoint that does not
 /// load or qualify is skipped with a warning (the committed ones are held to loading by a test);
 /// a name already taken keeps its agent.
 async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
     let dir = &state.settings.builtin_checkpoints;
-    if dir.as_os_str().is_empty() {
+    // (name, where it comes from, its text or why it has none)
+    let sources: Vec<(String, String, Result<String, String>)> = if dir.as_os_str().is_empty() {
         return Ok(());
-    }
-    let mut files: Vec<PathBuf> = match std::fs::read_dir(dir) {
-        Ok(entries) => entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json"))
-            .collect(),
-        Err(e) => {
-            tracing::warn!(dir = %dir.display(), "no built-in checkpoints: {e}");
-            return Ok(());
-        }
-    };
-    files.sort();
-    for path in files {
-        let Some(name) = path.file_stem().map(|s| s.to_string_lossy().to_string()) else {
-            continue;
+    } else if dir.as_os_str() == EMBEDDED_BUILTINS {
+        agents::builtins::CHECKPOINTS
+            .iter()
+            .map(|(name, text)| {
+                let from = format!("embedded {name}.json");
+                (name.to_string(), from, Ok(text.to_string()))
+            })
+            .collect()
+    } else {
+        let mut files: Vec<PathBuf> = match std::fs::read_dir(dir) {
+            Ok(entries) => entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "json"))
+                .collect(),
+            Err(e) => {
+                tracing::warn!(dir = %dir.display(), "no built-in checkpoints: {e}");
+                return Ok(());
+            }
         };
+        files.sort();
+        files
+            .into_iter()
+            .filter_map(|path| {
+                let name = path.file_stem()?.to_string_lossy().to_string();
+                let text = std::fs::read_to_string(&path).map_err(|e| e.to_string());
+                Some((name, path.display().to_string(), text))
+            })
+            .collect()
+    };
+    for (name, path, text) in sources {
         if let Err(e) = api::check_name(&name) {
-            tracing::warn!(path = %path.display(), "built-in checkpoint skipped: {e}");
+            tracing::warn!(%path, "built-in checkpoint skipped: {e}");
             continue;
         }
         if let Some(existing) = db::agent_by_name(&state.pool, &name).await? {
             if !existing.builtin {
                 tracing::warn!(%name, "a submitted agent holds the name of a built-in checkpoint; keeping it");
-            } else if std::fs::read_to_string(&path)
-                .is_ok_and(|text| db::spec_hash(&text) != existing.spec_hash)
+            } else if text
+                .as_ref()
+                .is_ok_and(|text| db::spec_hash(text) != existing.spec_hash)
             {
                 tracing::warn!(
                     %name,
-                    path = %path.display(),
+                    %path,
                     "the committed checkpoint differs from the built-in this database registered; keeping the registered one (its matches were played with it): a new database registers the new one"
                 );
             }
             continue;
         }
-        let loaded = std::fs::read_to_string(&path)
-            .map_err(|e| e.to_string())
-            .and_then(|text| {
-                agents::checkpoint::Checkpoint::from_json(&text, &state.model)
-                    .map(|c| (text, c))
-                    .map_err(|e| e.to_string())
-            });
+        let loaded = text.and_then(|text| {
+            agents::checkpoint::Checkpoint::from_json(&text, &state.model)
+                .map(|c| (text, c))
+                .map_err(|e| e.to_string())
+        });
         let (text, checkpoint) = match loaded {
             Ok(x) => x,
             Err(e) => {
-                tracing::warn!(path = %path.display(), "built-in checkpoint skipped: {e}");
+                tracing::warn!(%path, "built-in checkpoint skipped: {e}");
                 continue;
             }
         };

@@ -11,7 +11,7 @@ use super::{parse_preset, CliError};
 /// Arguments of `rally eval`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Agents: scripted, scripted-drive, scripted-soft, a committed checkpoint by name (kmac, muscle-ppo, …: config/checkpoints/NAME.json)\nor a checkpoint file (rally train writes OUT/checkpoint.json).\n\n\
+    after_help = "Agents: scripted, scripted-drive, scripted-soft, a built-in checkpoint by name (kmac, kmac-rally, muscle-ppo, muscle-pd, dynsyn:\nbuilt into the binary) or a checkpoint file (rally train writes OUT/checkpoint.json).\n\n\
                   Examples:\n  rally eval scripted --episodes 200 --seed 1 --serve p2\n  rally eval scripted --model myochallenge --episodes 1000 --seed 2026"
 )]
 pub struct EvalArgs {

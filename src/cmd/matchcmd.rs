@@ -15,7 +15,7 @@ use super::{parse_preset, CliError};
 /// Arguments of `rally match`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Agents: scripted, scripted-drive, scripted-soft, a committed checkpoint by name (kmac, kmac-rally, …: config/checkpoints/NAME.json)\nor a checkpoint file. A serves the even rallies, B the odd ones.\n\
+    after_help = "Agents: scripted, scripted-drive, scripted-soft, a built-in checkpoint by name (kmac, kmac-rally, muscle-ppo, muscle-pd, dynsyn:\nbuilt into the binary) or a checkpoint file. A serves the even rallies, B the odd ones.\n\
                   The same agents, rallies, preset and seed give byte-identical output (and replay).\n\n\
                   Example:\n  rally match scripted scripted-drive --rallies 20 --seed 1 --replay replay.json"
 )]

@@ -97,7 +97,9 @@ pub fn write_config(dir: &Path, workers: usize, continuous: bool, extra: &str) -
 /// Starts `rally serve` with `workers` match workers of its own (0: the API alone).
 pub fn start_serve(dir: &Path, workers: usize, continuous: bool, extra: &str) -> Server {
     let config = write_config(dir, workers, continuous, extra);
+    // From the test's own directory, not the checkout: the server needs nothing from where it starts.
     let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .current_dir(dir)
         .args(["serve", "--config"])
         .arg(&config)
         .env("RALLY_ADMIN_TOKEN", TOKEN)

@@ -111,12 +111,9 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         body
     };
     check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;
-    if db::agents(&s.pool)
-        .await?
-        .iter()
-        .any(|a| a.name == body.name)
-    {
-        return Err(ApiError::name_taken("an agent", &body.name));
+    // Names are unique regardless of case: `SCRIPTED` is not a second `scripted`.
+    if let Some(a) = db::agent_by_name(&s.pool, &body.name).await? {
+        return Err(ApiError::name_taken("an agent", &a.name));
     }
     let text = body.checkpoint.to_string();
     let checkpoint =

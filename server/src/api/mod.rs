@@ -43,7 +43,11 @@ pub struct ApiError {
 }
 
 impl ApiError {
-    fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> ApiError {
+    pub(crate) fn new(
+        status: StatusCode,
+        code: &'static str,
+        message: impl Into<String>,
+    ) -> ApiError {
         ApiError {
             status,
             code,
@@ -206,15 +210,70 @@ pub fn router(state: AppState) -> Router {
                 "no_route",
                 "no such endpoint (see /api/v1/openapi.json)",
             )
-        });
+        })
+        .method_not_allowed_fallback(method_not_allowed);
     Router::new()
         .route("/", get(|| async { Html(crate::page::INDEX) }))
         .route("/replay", get(|| async { Html(crate::page::REPLAY) }))
         .route("/agent", get(|| async { Html(crate::page::AGENT) }))
+        .method_not_allowed_fallback(method_not_allowed)
         .nest("/api/v1", api)
         .layer(DefaultBodyLimit::max(state.settings.max_body_bytes))
+        .layer(axum::middleware::from_fn(json_errors))
         .layer(tower_http::compression::CompressionLayer::new())
         .with_state(state)
+}
+
+/// Gives every error answer the JSON error body: the handlers' errors have it already; this catches
+/// the rest (an extractor's rejection in plain text, a route-less 404 with no body), keeping its
+/// status and its text as the message.
+async fn json_errors(req: Request, next: axum::middleware::Next) -> Response {
+    let resp = next.run(req).await;
+    let status = resp.status();
+    let is_json = resp
+        .headers()
+        .get(axum::http::header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return resp;
+    }
+    let retry_after = resp.headers().get(axum::http::header::RETRY_AFTER).cloned();
+    let text = axum::body::to_bytes(resp.into_body(), 4096)
+        .await
+        .map(|b| String::from_utf8_lossy(&b).trim().to_string())
+        .unwrap_or_default();
+    let message = if text.is_empty() {
+        status.canonical_reason().unwrap_or("error").to_lowercase()
+    } else {
+        text
+    };
+    let code = match status.as_u16() {
+        400 => "bad_request",
+        404 => "not_found",
+        405 => "method_not_allowed",
+        408 => "request_timeout",
+        413 => "body_too_large",
+        415 => "unsupported_media_type",
+        422 => "unprocessable",
+        429 => "rate_limited",
+        500..=599 => "internal",
+        _ => "http_error",
+    };
+    let mut out = ApiError::new(status, code, message).into_response();
+    if let Some(r) = retry_after {
+        out.headers_mut().insert(axum::http::header::RETRY_AFTER, r);
+    }
+    out
+}
+
+/// A route that exists, asked with a method it does not take: 405 with the JSON error body.
+async fn method_not_allowed(method: axum::http::Method) -> ApiError {
+    ApiError::new(
+        StatusCode::METHOD_NOT_ALLOWED,
+        "method_not_allowed",
+        format!("{method} is not allowed here (see /api/v1/openapi.json for each route's methods)"),
+    )
 }
 
 async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {

@@ -2,10 +2,12 @@
 
 use super::*;
 
-/// Registers the scripted variants as built-in agents (idempotent).
+/// Registers the scripted variants as built-in agents (idempotent). An `INSERT … SELECT … WHERE NOT
+/// EXISTS` rather than `ON CONFLICT DO NOTHING`, which takes an id from the sequence even when it
+/// inserts nothing (agent ids skipped three at every restart).
 pub async fn register_builtins(pool: &Pool) -> anyhow::Result<()> {
     for (name, _) in ::agents::scripted::variants() {
-        sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin) VALUES ($1, 'scripted', $2, $3, 1) ON CONFLICT (name) DO NOTHING")
+        sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin) SELECT $1, 'scripted', $2, $3, 1 WHERE NOT EXISTS (SELECT 1 FROM agents WHERE lower(name) = lower($1))")
             .bind(name)
             .bind(name)
             .bind(spec_hash(name))
@@ -59,10 +61,10 @@ pub async fn agent(pool: &Pool, id: i64) -> sqlx::Result<Option<Agent>> {
         .await
 }
 
-/// The agent with a name.
+/// The agent with a name, in any case (names are unique regardless of case).
 pub async fn agent_by_name(pool: &Pool, name: &str) -> sqlx::Result<Option<Agent>> {
     sqlx::query_as(&format!(
-        "SELECT {AGENT_COLUMNS} FROM agents WHERE name = $1"
+        "SELECT {AGENT_COLUMNS} FROM agents WHERE lower(name) = lower($1)"
     ))
     .bind(name)
     .fetch_optional(pool)
@@ -100,4 +102,37 @@ pub async fn insert_checkpoint_agent(
     .bind(submitted_by)
     .fetch_one(pool)
     .await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn restarts_take_no_ids_and_names_are_unique_in_any_case() {
+        let pool = test_store("agent_names").await;
+        // Three starts register the scripted agents once, and take no id for the ones that exist.
+        for _ in 0..3 {
+            register_builtins(&pool).await.unwrap();
+        }
+        let n = ::agents::scripted::variants().len() as i64;
+        let ids: Vec<i64> = agents(&pool).await.unwrap().iter().map(|a| a.id).collect();
+        assert_eq!(ids, (1..=n).collect::<Vec<_>>());
+        let qual = (6, 0.5, 0.1, 0.1);
+        let id = insert_checkpoint_agent(&pool, "mine", "{}", qual, false, None)
+            .await
+            .unwrap();
+        assert_eq!(id, n + 1);
+        // The store itself refuses a name that differs only in case, whoever checks first.
+        let err = insert_checkpoint_agent(&pool, "MINE", "{}", qual, false, None)
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(&err, sqlx::Error::Database(e) if e.is_unique_violation()),
+            "{err}"
+        );
+        let found = agent_by_name(&pool, "Mine").await.unwrap().unwrap();
+        assert_eq!((found.id, found.name.as_str()), (id, "mine"));
+        assert!(agent_by_name(&pool, "SCRIPTED").await.unwrap().is_some());
+    }
 }
