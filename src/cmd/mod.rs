@@ -119,6 +119,15 @@ pub struct Body {
     pub name: String,
 }
 
+/// The arena configuration (grip) a `--model` plays with: MyoChallenge's for `myochallenge`, the
+/// built-in arena's for the default robot and any MJCF file.
+pub fn arena_config(model_name: &str) -> sim::config::ArenaConfig {
+    match model_name {
+        "myochallenge" => sim::config::ArenaConfig::myochallenge(),
+        _ => sim::config::ArenaConfig::default(),
+    }
+}
+
 impl ModelArg {
     /// Loads the model and checks that its grip configuration fits it (a usage error otherwise).
     pub fn load(&self) -> Result<Body, CliError> {
@@ -126,10 +135,7 @@ impl ModelArg {
             "default" => default_model()?,
             other => std::sync::Arc::new(model::resolve_model(other)?.0),
         };
-        let config = match self.name.as_str() {
-            "myochallenge" => sim::config::ArenaConfig::myochallenge(),
-            _ => sim::config::ArenaConfig::default(),
-        };
+        let config = arena_config(&self.name);
         sim::robot::Robot::new(model.clone(), &config.grip, sim::Side::A)
             .map_err(|e| CliError::Usage(format!("--model {}: {e}", self.name)))?;
         Ok(Body {

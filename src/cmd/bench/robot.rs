@@ -29,11 +29,7 @@ const SPLIT_REPEATS: usize = 7;
 /// default robot's grip settings).
 pub fn bench_model(arg: &str) -> Result<(Arc<Model>, ArenaConfig, PathBuf), CliError> {
     let (model, path) = resolve_model(arg)?;
-    let config = match arg {
-        "myochallenge" => ArenaConfig::myochallenge(),
-        _ => ArenaConfig::default(),
-    };
-    Ok((Arc::new(model), config, path))
+    Ok((Arc::new(model), crate::cmd::arena_config(arg), path))
 }
 
 /// The start of every stretch: the keyframe, every muscle's control and activation at 0.1, every
