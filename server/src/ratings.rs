@@ -121,14 +121,6 @@ pub struct Leaderboard {
     pub rows: Vec<Row>,
 }
 
-fn splitmix(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
 fn percentile(sorted: &[f64], p: f64) -> f64 {
     let k = ((sorted.len() - 1) as f64 * p).round() as usize;
     sorted[k]
@@ -168,7 +160,7 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
         let mut state = 0x5eed_u64;
         for _ in 0..BOOTSTRAP {
             let picks: Vec<usize> = (0..pairs.len())
-                .map(|_| (splitmix(&mut state) % pairs.len() as u64) as usize)
+                .map(|_| (agents::seeds::splitmix64(&mut state) % pairs.len() as u64) as usize)
                 .collect();
             let r = fit(&mut picks.iter().map(|&k| &pairs[k]), Some(&rating));
             for (i, x) in r.into_iter().enumerate() {

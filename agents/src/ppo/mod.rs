@@ -486,14 +486,9 @@ impl TrainConfig {
     }
 }
 
-/// A 64-bit stream seed mixed from a run seed and up to three counters (SplitMix64 finaliser), so
+/// A 64-bit stream seed mixed from a run seed and up to three counters (SplitMix64 steps), so
 /// that every environment, episode and iteration draws from its own stream.
 pub fn stream_seed(seed: u64, a: u64, b: u64, c: u64) -> u64 {
-    let mix = |mut z: u64| {
-        z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    };
+    let mix = |z: u64| crate::seeds::mix64(z.wrapping_add(crate::seeds::SPLITMIX_GAMMA));
     mix(mix(mix(mix(seed) ^ a) ^ b) ^ c)
 }

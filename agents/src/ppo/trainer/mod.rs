@@ -7,6 +7,16 @@
 //! (`stream_seed`). Every `checkpoint_every` iterations a *segment* begins with fresh episodes in
 //! every environment, so the state saved there (weights, Adam, normaliser, statistics) is all a
 //! resumed run needs to continue as the same run, bit for bit.
+//!
+//! By part: this file (the trainer, its rollout and update), [`progress`] (statistics, curve,
+//! validations), `envs` (the environments a run steps), `outputs` (validation, checkpoints, the bank).
+
+mod envs;
+mod outputs;
+pub mod progress;
+
+use envs::*;
+pub use progress::*;
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -14,7 +24,6 @@ use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use sim::config::ArenaConfig;
 use sim::model::Model;
 use sim::rng::Rng;
@@ -24,11 +33,8 @@ use super::gae::{gae, normalise, StepEnd};
 use super::loss;
 use super::normalizer::RunningNormalizer;
 use super::policy::ActorCritic;
-use super::{stream_seed, Method, Schedule, TrainConfig, TrainEnv};
-use crate::checkpoint::{Checkpoint, ObservationSpec, Training, TrainingPoint, FORMAT, VERSION};
+use super::{stream_seed, Method, Schedule, TrainConfig};
 use crate::controller::ControllerSpec;
-use crate::env::{Env, EpisodeEnd, RallyEnv};
-use crate::observation::ObsBlock;
 
 /// Episodes the rolling training statistics are taken over.
 pub const RECENT_EPISODES: usize = 200;
@@ -39,222 +45,6 @@ const STREAM_EPISODE: u64 = 2;
 const STREAM_NOISE: u64 = 3;
 const STREAM_MINIBATCH: u64 = 4;
 const STREAM_BANK: u64 = 5;
-
-/// One finished training episode.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct EpisodeStat {
-    /// Sum of the (unscaled) rewards.
-    pub reward: f64,
-    /// Control steps.
-    pub steps: u32,
-    /// The paddle touched the ball.
-    pub hit: bool,
-    /// The return was legal (or predicted legal, when the training episode ended before it landed).
-    pub success: bool,
-    /// Mean ‖a‖₁/n_a over its steps.
-    pub mean_activation: f64,
-    /// Legal returns in the episode (a rally's, by both sides; a single serve's: 0 or 1).
-    #[serde(default)]
-    pub rally_length: u32,
-    /// Times the `dual` term was paid to this robot (its return crossed the other plane in the box).
-    #[serde(default)]
-    pub dual: f64,
-}
-
-/// One row of the learning curve: an iteration's losses and the rolling episode statistics after it.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
-pub struct CurveRow {
-    /// Iterations done.
-    pub iteration: u64,
-    /// Control steps simulated so far (all environments).
-    pub env_steps: u64,
-    /// Training wall time so far, s.
-    pub wall_s: f64,
-    /// Episodes finished so far.
-    pub episodes: u64,
-    /// Mean episode reward (unscaled) over the last `RECENT_EPISODES`.
-    pub reward: f64,
-    /// Mean episode length, control steps.
-    pub length: f64,
-    /// Hit rate over the last episodes.
-    pub hit_rate: f64,
-    /// Success rate over the last episodes.
-    pub success_rate: f64,
-    /// Mean activation over the last episodes.
-    pub mean_activation: f64,
-    /// Mean of the position term `exp(−8·d)` over this rollout's steps before contact (the command
-    /// tracking: 1 when the blade sits at the planned strike point).
-    pub tracking: f64,
-    /// Learning rate after the update.
-    pub learning_rate: f64,
-    /// Mean KL(old ‖ new) over the update's minibatches.
-    pub kl: f64,
-    /// Mean clipped value loss.
-    pub value_loss: f64,
-    /// Mean clipped surrogate loss.
-    pub surrogate_loss: f64,
-    /// Policy entropy.
-    pub entropy: f64,
-    /// Mean policy σ.
-    pub std: f64,
-    /// Mean legal returns per episode over the last episodes (a rally's length).
-    #[serde(default)]
-    pub rally_length: f64,
-    /// Mean times per episode the `dual` term was paid, over the last episodes.
-    #[serde(default)]
-    pub dual: f64,
-}
-
-/// Where the time of the run went, s (this process only).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct Timing {
-    /// Stepping and resetting the environments (parallel).
-    pub simulation: f64,
-    /// The policy's batched forward passes and sampling during rollouts.
-    pub policy: f64,
-    /// GAE and PPO's update.
-    pub update: f64,
-    /// Control steps simulated.
-    pub env_steps: u64,
-}
-
-/// What a run has done so far, besides its tensors.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Progress {
-    /// Iterations done.
-    pub iteration: u64,
-    /// Control steps simulated.
-    pub env_steps: u64,
-    /// Training wall time, s, over every process of the run.
-    pub wall_s: f64,
-    /// Episodes finished.
-    pub episodes: u64,
-    /// The last episodes.
-    pub recent: VecDeque<EpisodeStat>,
-    /// One row per iteration.
-    pub curve: Vec<CurveRow>,
-    /// The run directory this run's weights started from (a warm start), if any.
-    #[serde(default)]
-    pub warm_start: Option<String>,
-    /// Every validation so far (see [`super::ValidationConfig`]).
-    #[serde(default)]
-    pub validations: Vec<ValidationPoint>,
-}
-
-impl Progress {
-    /// The best validation so far (the earliest of equals).
-    pub fn best_validation(&self) -> Option<&ValidationPoint> {
-        self.validations
-            .iter()
-            .fold(None, |best: Option<&ValidationPoint>, v| match best {
-                Some(b) if b.score >= v.score => Some(b),
-                _ => Some(v),
-            })
-    }
-}
-
-/// One validation of the policy on held-out episodes.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct ValidationPoint {
-    /// Iterations done when it was taken.
-    pub iteration: u64,
-    /// Env steps done then.
-    pub env_steps: u64,
-    /// Mean rally length (rally environment) or success rate (single serves).
-    pub score: f64,
-    /// Rallies or episodes played.
-    pub episodes: usize,
-    /// Longest rally (rally environment; 0 for single serves).
-    #[serde(default)]
-    pub longest: u32,
-}
-
-/// A training environment: a single serve (one robot) or a self-play rally (two).
-enum TrainingEnv {
-    Single(Box<Env>),
-    Rally(Box<RallyEnv>),
-}
-
-/// What one robot's step gave.
-struct AgentStep {
-    reward: f64,
-    done: bool,
-    /// The episode reached its time limit (or cap) rather than a terminal state.
-    time_limit: bool,
-    hit: bool,
-    success: bool,
-    rally_length: u32,
-    dual: f64,
-    /// The position term, while the robot tracks a command before contact.
-    tracking: Option<f64>,
-    /// ‖a‖₁/n_a after the step.
-    activation: f64,
-}
-
-impl TrainingEnv {
-    fn reset(&mut self, seed: u64) {
-        match self {
-            TrainingEnv::Single(e) => {
-                e.reset(seed);
-            }
-            TrainingEnv::Rally(e) => e.reset(seed),
-        }
-    }
-
-    fn observe_into(&self, out: &mut Vec<f64>) {
-        match self {
-            TrainingEnv::Single(e) => out.extend_from_slice(e.observation()),
-            TrainingEnv::Rally(e) => {
-                out.extend_from_slice(e.observation(0));
-                out.extend_from_slice(e.observation(1));
-            }
-        }
-    }
-
-    /// One control step with the rows of `actions` (one per robot).
-    fn step(&mut self, actions: &[Vec<f64>]) -> Vec<AgentStep> {
-        match self {
-            TrainingEnv::Single(env) => {
-                let tr = env.step(&actions[0]);
-                let tracking =
-                    (!tr.hit && env.observer.command().is_some()).then_some(tr.terms.position);
-                let time_limit = tr.done
-                    && env.episode.referee.end().is_none()
-                    && !tr.success
-                    && env.episode.steps >= env.episode.max_steps;
-                vec![AgentStep {
-                    reward: tr.reward,
-                    done: tr.done,
-                    time_limit,
-                    hit: tr.hit,
-                    success: tr.success,
-                    rally_length: tr.success as u32,
-                    dual: 0.0,
-                    tracking,
-                    activation: tr.terms.effort,
-                }]
-            }
-            TrainingEnv::Rally(env) => {
-                let trs = env.step([&actions[0], &actions[1]]);
-                let length = trs.iter().map(|t| t.returns).sum();
-                let capped = env.capped();
-                trs.iter()
-                    .map(|t| AgentStep {
-                        reward: t.step.reward,
-                        done: t.step.done,
-                        time_limit: t.step.done && capped,
-                        hit: t.step.hit,
-                        success: t.step.success,
-                        rally_length: length,
-                        dual: t.step.terms.dual,
-                        tracking: t.tracking,
-                        activation: t.step.terms.effort,
-                    })
-                    .collect()
-            }
-        }
-    }
-}
 
 /// One robot's running episode.
 #[derive(Debug, Clone, Copy, Default)]
@@ -313,64 +103,6 @@ pub struct Trainer {
     pub arena: ArenaConfig,
     /// The robot's name as the command line gave it (`default`, `myochallenge`, a file).
     pub model_name: String,
-}
-
-/// The ball bank `[bank] file` names, read once for every environment; `None` without a file.
-fn read_bank(config: &TrainConfig) -> Result<Option<crate::env::BallBank>, String> {
-    let Some(file) = &config.bank.file else {
-        return Ok(None);
-    };
-    let text = std::fs::read_to_string(file).map_err(|e| format!("bank.file {file}: {e}"))?;
-    let balls = crate::env::BallBank::parse(&text).map_err(|e| format!("bank.file {file}: {e}"))?;
-    Ok(Some(crate::env::BallBank {
-        balls: balls.into(),
-        fraction: config.bank.fraction,
-    }))
-}
-
-/// The training environment a method runs in; its observation and action sizes.
-fn make_env(
-    model: &Arc<Model>,
-    arena: &ArenaConfig,
-    controller: &ControllerSpec,
-    config: &TrainConfig,
-    bank: Option<&crate::env::BallBank>,
-) -> Result<(TrainingEnv, usize, usize), String> {
-    // Both environments: MyoChallenge contact laws, every observation block.
-    let (preset, blocks) = (sim::arena::MYOCHALLENGE, ObsBlock::ALL.to_vec());
-    let grip_floor = config.controller.grip_floor;
-    Ok(match config.env {
-        TrainEnv::Single => {
-            let kind = config.serve.kind();
-            let mut env = Env::new(
-                model.clone(),
-                arena,
-                preset,
-                controller,
-                blocks,
-                config.reward,
-                kind,
-            )?;
-            env.end = EpisodeEnd::Training;
-            env.grip_floor = grip_floor;
-            env.bank = bank.cloned();
-            let (o, a) = (env.obs_dim(), env.action_dim());
-            (TrainingEnv::Single(Box::new(env)), o, a)
-        }
-        TrainEnv::Rally => {
-            let mut env = RallyEnv::new(
-                model.clone(),
-                arena,
-                preset,
-                controller,
-                blocks,
-                config.reward,
-            )?;
-            env.grip_floor = grip_floor;
-            let (o, a) = (env.obs_dim(), env.action_dim());
-            (TrainingEnv::Rally(Box::new(env)), o, a)
-        }
-    })
 }
 
 fn e(err: candle_core::Error) -> String {
@@ -798,181 +530,6 @@ impl Trainer {
             surrogate: sums.surrogate / count,
             value: sums.value / count,
             entropy: sums.entropy / count,
-        })
-    }
-
-    /// Plays the policy as a checkpoint would play it (its trained Gaussian, seeded per episode) on
-    /// the validation's held-out episodes: self-play rallies in the rally environment (score: mean
-    /// rally length), single serves of the training distribution otherwise (score: success rate).
-    /// Reads the weights and the observation statistics, changes nothing.
-    pub fn validate(&self) -> Result<ValidationPoint, String> {
-        let v = &self.config.validation;
-        let player = crate::factory::PlayerSpec::Checkpoint(Arc::new(self.validation_checkpoint(
-            "validation",
-            "",
-            "",
-        )?));
-        let (config, preset) = (self.arena.clone(), sim::arena::MYOCHALLENGE);
-        let (score, longest) = match self.config.validation_env() {
-            TrainEnv::Rally => {
-                let spec = self.match_spec(v.episodes as u32, v.seed);
-                let lengths: Vec<u32> = crate::matchrun::play_rallies(&spec, &player, &player)?
-                    .iter()
-                    .map(|r| r.length)
-                    .collect();
-                (
-                    mean_of(lengths.iter().map(|&l| l as f64)),
-                    lengths.iter().copied().max().unwrap_or(0),
-                )
-            }
-            TrainEnv::Single => {
-                let e = crate::eval::Evaluation {
-                    model: self.model.clone(),
-                    config,
-                    preset,
-                    kind: self.config.serve.kind(),
-                    episodes: v.episodes,
-                    seed: v.seed,
-                };
-                let r = crate::eval::evaluate(&e, &player, &|| {})?;
-                (r.success_rate.value, 0)
-            }
-        };
-        Ok(ValidationPoint {
-            iteration: self.progress.iteration,
-            env_steps: self.progress.env_steps,
-            score,
-            episodes: v.episodes,
-            longest,
-        })
-    }
-
-    /// The checkpoint as validation plays it: [`Trainer::checkpoint`] with its noise scaled by
-    /// `[validation] noise_scale` (what `best.json` holds).
-    pub fn validation_checkpoint(
-        &self,
-        name: &str,
-        command: &str,
-        commit: &str,
-    ) -> Result<Checkpoint, String> {
-        let mut ck = self.checkpoint(name, command, commit)?;
-        let scale = self.config.validation.noise_scale;
-        if scale != 1.0 {
-            ck.scale_noise(scale).map_err(|e| e.to_string())?;
-        }
-        Ok(ck)
-    }
-
-    /// A match of `rallies` rallies on `seed` in the run's arena (MyoChallenge contact laws),
-    /// without replay: what validation and the bank's refresh play.
-    fn match_spec(&self, rallies: u32, seed: u64) -> crate::matchrun::MatchSpec {
-        crate::matchrun::MatchSpec {
-            model: self.model.clone(),
-            config: self.arena.clone(),
-            preset: sim::arena::MYOCHALLENGE,
-            rallies,
-            seed,
-            replay: false,
-        }
-    }
-
-    /// Replaces the single-serve environments' ball bank with `balls` (served in `[bank] fraction`
-    /// of the episodes from the next segment on).
-    pub fn set_bank(&mut self, balls: Arc<[sim::ball::BallState]>) {
-        let fraction = self.config.bank.fraction;
-        for s in &mut self.slots {
-            if let TrainingEnv::Single(env) = &mut s.env {
-                env.bank = Some(crate::env::BallBank {
-                    balls: balls.clone(),
-                    fraction,
-                });
-            }
-        }
-        self.bank = Some(balls);
-    }
-
-    /// Records the policy's own legal returns in `[bank] refresh_rallies` self-play rallies (their
-    /// seed from the run's seed and the iteration) and makes them the bank; returns how many. A
-    /// policy that returned nothing keeps the old bank.
-    pub fn refresh_bank(&mut self) -> Result<usize, String> {
-        let player =
-            crate::factory::PlayerSpec::Checkpoint(Arc::new(self.checkpoint("bank", "", "")?));
-        let spec = self.match_spec(
-            self.config.bank.refresh_rallies as u32,
-            stream_seed(self.seed, STREAM_BANK, self.progress.iteration, 0),
-        );
-        let balls = crate::matchrun::record_returns(&spec, &player, &player)?;
-        if !balls.is_empty() {
-            self.set_bank(balls.clone().into());
-        }
-        Ok(balls.len())
-    }
-
-    /// The policy as a checkpoint in the agents' format, named `name`, with its provenance.
-    pub fn checkpoint(
-        &self,
-        name: &str,
-        command: &str,
-        git_commit: &str,
-    ) -> Result<Checkpoint, String> {
-        let last = self.progress.curve.last().copied().unwrap_or_default();
-        // At most ~200 points of the curve travel with the checkpoint.
-        let stride = self.progress.curve.len().div_ceil(200).max(1);
-        let curve = self
-            .progress
-            .curve
-            .iter()
-            .enumerate()
-            .filter(|(i, r)| {
-                r.episodes > 0 && ((i + 1) % stride == 0 || i + 1 == self.progress.curve.len())
-            })
-            .map(|(_, r)| TrainingPoint {
-                env_steps: r.env_steps,
-                reward: r.reward,
-                hit_rate: r.hit_rate,
-                success_rate: r.success_rate,
-            })
-            .collect();
-        Ok(Checkpoint {
-            format: FORMAT.into(),
-            version: VERSION,
-            name: name.into(),
-            controller: self.controller.clone(),
-            observation: ObservationSpec {
-                blocks: ObsBlock::ALL.to_vec(),
-                mean: self.normalizer.mean.clone(),
-                std: self.normalizer.scale(),
-            },
-            policy: Some(self.net.actor_mlp().map_err(e)?),
-            onnx: None,
-            policy_std: Some(
-                self.net
-                    .std()
-                    .map_err(e)?
-                    .iter()
-                    .map(|&s| s as f64)
-                    .collect(),
-            ),
-            grip_floor: (self.config.controller.grip_floor > 0.0)
-                .then_some(self.config.controller.grip_floor),
-            training: Some(Training {
-                method: self.method.name().into(),
-                command: command.into(),
-                seed: self.seed,
-                git_commit: git_commit.into(),
-                env_steps: self.progress.env_steps,
-                iterations: self.progress.iteration,
-                wall_seconds: self.progress.wall_s,
-                hit_rate: last.hit_rate,
-                success_rate: last.success_rate,
-                episodes: self.progress.recent.len() as u64,
-                curve,
-                env: self.config.env.name().into(),
-                warm_start: self.progress.warm_start.clone(),
-                rally_length: (self.config.env == TrainEnv::Rally).then_some(last.rally_length),
-                note: None,
-                noise_scale: None,
-            }),
         })
     }
 }

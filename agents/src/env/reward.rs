@@ -1,0 +1,263 @@
+//! The reward: its named terms and weights, and the stroke reward of one incoming ball.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+use sim::arena::{self, Side};
+use sim::ball::BallState;
+use sim::predict::BounceModel;
+use sim::robot::Robot;
+
+use crate::planner::Plan;
+
+type V3 = Vector3<f64>;
+
+/// The reward's terms (paper §IV-B; docs/design.md §6): `r = w_g·r_g + w_c·r_c + w_s·r_s`, each a sum of named
+/// terms. One struct holds both a step's term values (each in [0, 1]) and their weights
+/// ([`RewardWeights`]), so a term is named once.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RewardTerms {
+    /// Grasp (dense): `exp(−20·d)`, `d` the paddle's distance from its place in the hand (official ×4
+    /// for position and ×4 for orientation; our grip holds both together).
+    pub grasp: f64,
+    /// Command (dense): `exp(−8·d)`, `d` the blade centre's distance from the planned strike point;
+    /// paid in full from contact until the stroke is judged (official ×20).
+    pub position: f64,
+    /// Command (dense): `exp(−2·θ)`, `θ` the angle between the blade normal and the planned one
+    /// (either face); paid in full from contact until the stroke is judged (official ×10).
+    pub orientation: f64,
+    /// Command (sparse, at contact): `exp(−|v − v̂|)`, the paddle's velocity against the planned
+    /// racket velocity (paper §IV-B; not in the official code's list: ours).
+    pub velocity: f64,
+    /// Command (sparse, at first contact): `exp(−|v_b − v̂_o|)`, the ball's velocity as it leaves the
+    /// paddle against the planned outgoing velocity (ours; 0 unless weighted): a graded signal for
+    /// the strokes the task terms only call faults (most returns that go out leave 1–2 m/s too
+    /// steep, agents/examples/strokes.rs).
+    #[serde(default)]
+    pub ball_out: f64,
+    /// Task (sparse, once per ball): the paddle touched the ball (official ×100).
+    pub hit: f64,
+    /// Task (sparse, once per ball): the return is predicted to land on the other half (official ×100).
+    pub landing: f64,
+    /// Task (sparse, once per ball): `exp(−0.5·‖(y_r, z) − (0, 1.225)‖)` of the return's predicted
+    /// crossing of the other hitting plane, against the serve box's centre (official ×100).
+    pub centre: f64,
+    /// Task (sparse, once per ball): that crossing lies inside the serve box (official ×100).
+    pub in_box: f64,
+    /// Task (sparse, once per ball): a return predicted to go into the net or out (official −20).
+    pub fault: f64,
+    /// Dual rally only (dense): `exp(−4·d)`, `d` the paddle's distance from where it was at the
+    /// rally's start, while no ball is coming and no stroke is being judged — the paper's "maintain
+    /// stability after striking", so that the robot is ready for the next ball (ours).
+    #[serde(default)]
+    pub ready: f64,
+    /// Dual rally only (sparse): the robot's return really crossed the other hitting plane inside the
+    /// serve box (paper §IV-C).
+    pub dual: f64,
+    /// Effort (dense, ours; the official code has none): the step's mean muscle activation
+    /// `‖a‖₁/n_a`, the metric `rally eval` reports beside effort (docs/design.md §7); a negative weight prices
+    /// activation. 0 unless weighted.
+    #[serde(default)]
+    pub effort: f64,
+}
+
+impl RewardTerms {
+    /// `Σ wᵢ·termᵢ`.
+    pub fn total(&self, w: &RewardWeights) -> f64 {
+        let w = &w.0;
+        w.grasp * self.grasp
+            + w.position * self.position
+            + w.orientation * self.orientation
+            + w.velocity * self.velocity
+            + w.ball_out * self.ball_out
+            + w.hit * self.hit
+            + w.landing * self.landing
+            + w.centre * self.centre
+            + w.in_box * self.in_box
+            + w.fault * self.fault
+            + w.ready * self.ready
+            + w.dual * self.dual
+            + w.effort * self.effort
+    }
+}
+
+/// The weights of the reward's terms; the defaults are the official code's (docs/design.md §11) where it has
+/// the term.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct RewardWeights(pub RewardTerms);
+
+impl std::ops::Deref for RewardWeights {
+    type Target = RewardTerms;
+    fn deref(&self) -> &RewardTerms {
+        &self.0
+    }
+}
+
+impl Default for RewardWeights {
+    fn default() -> Self {
+        RewardWeights(RewardTerms {
+            grasp: 4.0,
+            position: 20.0,
+            orientation: 10.0,
+            velocity: 20.0,
+            ball_out: 0.0,
+            hit: 100.0,
+            landing: 100.0,
+            centre: 100.0,
+            in_box: 100.0,
+            fault: -20.0,
+            ready: 10.0,
+            dual: 100.0,
+            effort: 0.0,
+        })
+    }
+}
+
+/// The serve box's centre height, m (official code: the `(0, 1.225)` the `centre` term aims at).
+pub const SERVE_BOX_CENTRE_Z: f64 = 0.5 * (arena::SERVE_BOX_Z.0 + arena::SERVE_BOX_Z.1);
+/// Control steps after the ball leaves the paddle at which the task terms are judged and a training
+/// episode ends (official code: 3).
+pub const TASK_DELAY_STEPS: usize = 3;
+/// A training episode without contact ends this long after the planned strike time, s (official).
+pub const MISS_GRACE: f64 = 0.05;
+
+/// Grasp term: 1 while the paddle is at its place in the hand, `exp(−20·d)` once it slips.
+pub fn grasp_term(robot: &Robot) -> f64 {
+    (-20.0 * robot.paddle_offset()).exp()
+}
+
+/// The robot's mean muscle activation `‖a‖₁/n_a` (docs/design.md §7's mean activation, one step).
+pub fn mean_activation(robot: &Robot) -> f64 {
+    let (sum, n) = robot
+        .model()
+        .muscles()
+        .fold((0.0, 0usize), |(s, n), (i, _)| {
+            (s + robot.state.act[i].abs(), n + 1)
+        });
+    sum / n.max(1) as f64
+}
+
+/// Dense pose terms against the plan: `exp(−8·d)` of the blade centre's distance to the strike point,
+/// `exp(−2·θ)` of the angle between the blade normal (either face) and the planned normal.
+pub fn pose_terms(blade: &V3, normal: &V3, plan: &Plan) -> (f64, f64) {
+    let u: V3 = plan.racket_quat * V3::z();
+    let d = (blade - plan.strike_pos).norm();
+    let theta = normal.dot(&u).abs().min(1.0).acos();
+    ((-8.0 * d).exp(), (-2.0 * theta).exp())
+}
+
+/// Sparse velocity term at contact.
+pub fn velocity_term(paddle_vel: &V3, plan: &Plan) -> f64 {
+    (-(paddle_vel - plan.racket_vel).norm()).exp()
+}
+
+/// The task terms of a ball (robot frame) that this robot (side A of its frame) has just returned:
+/// predicted landing on the other half, closeness of the crossing of the other plane to the serve
+/// box's centre, that crossing in the box, or a predicted fault.
+pub fn task_terms(ball: &BallState, bounce: &BounceModel, terms: &mut RewardTerms) {
+    let lands = predicted_legal(ball, bounce);
+    if !lands {
+        terms.fault = 1.0;
+        return;
+    }
+    terms.landing = 1.0;
+    let crossing =
+        sim::predict::plane_crossing(&ball.pos, &ball.vel, Side::B.strike_plane_x(), bounce);
+    if let Some(c) = &crossing {
+        let (y_r, z) = Side::B.receiver_frame(&c.pos);
+        terms.centre = (-0.5 * (y_r * y_r + (z - SERVE_BOX_CENTRE_Z).powi(2)).sqrt()).exp();
+    }
+    if sim::predict::return_is_in_box(Side::A, &crossing) {
+        terms.in_box = 1.0;
+    }
+}
+
+/// Whether the ball (robot frame), just returned by this robot, is predicted to land on the other half:
+/// its next bounce is there and it passes over the net on the way.
+pub fn predicted_legal(ball: &BallState, bounce: &BounceModel) -> bool {
+    sim::predict::next_bounce(&ball.pos, &ball.vel, bounce).is_some_and(|b| b.pos.x < 0.0)
+        && sim::predict::clears_net(&ball.pos, &ball.vel)
+}
+
+/// Blade centre and normal of a robot's paddle (robot frame).
+pub fn blade(robot: &Robot) -> (V3, V3) {
+    let p = &robot.paddle.pose;
+    let rot: UnitQuaternion<f64> = p.rot;
+    (p.to_world(&robot.shape.blade.center), rot * V3::z())
+}
+
+/// The reward of one incoming ball, step by step: dense pose terms against the plan (in full once
+/// the ball was touched), the velocity term at contact, and the task terms once, `TASK_DELAY_STEPS`
+/// after the ball left the paddle.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct StrokeReward {
+    /// Steps since the last control step with a paddle contact, once there was one.
+    pub(crate) since_contact: Option<usize>,
+    /// The task terms were paid for this ball.
+    pub(crate) judged: bool,
+}
+
+impl StrokeReward {
+    /// The ball was touched and its task terms are still to be paid.
+    pub(crate) fn in_progress(&self) -> bool {
+        self.since_contact.is_some() && !self.judged
+    }
+}
+
+impl StrokeReward {
+    /// This step's terms for `robot` (robot frame), `contact` whether the paddle touched the ball in
+    /// it, `plan` the command. Returns the terms and whether the task terms were paid now.
+    pub(crate) fn step(
+        &mut self,
+        robot: &Robot,
+        ball_world: &BallState,
+        contact: bool,
+        plan: Option<&Plan>,
+        bounce: &BounceModel,
+    ) -> (RewardTerms, bool) {
+        let mut terms = RewardTerms {
+            grasp: grasp_term(robot),
+            effort: mean_activation(robot),
+            ..RewardTerms::default()
+        };
+        let touched = !self.judged && (contact || self.since_contact.is_some());
+        if contact {
+            if self.since_contact.is_none() {
+                terms.hit = 1.0;
+            }
+            self.since_contact = Some(0);
+        } else if let Some(k) = self.since_contact.as_mut() {
+            *k += 1;
+        }
+        if touched {
+            terms.position = 1.0;
+            terms.orientation = 1.0;
+        } else if let Some(plan) = plan {
+            let (c, n) = blade(robot);
+            (terms.position, terms.orientation) = pose_terms(&c, &n, plan);
+        }
+        if contact {
+            if let Some(plan) = plan {
+                terms.velocity = velocity_term(&robot.paddle.lin_vel, plan);
+                if terms.hit == 1.0 {
+                    let v = robot.frame.vector_from_world(&ball_world.vel);
+                    terms.ball_out = (-(v - plan.v_out).norm()).exp();
+                }
+            }
+        }
+        let mut paid = false;
+        if !self.judged && self.since_contact == Some(TASK_DELAY_STEPS) {
+            self.judged = true;
+            paid = true;
+            let f = robot.frame;
+            let local = BallState {
+                pos: f.point_from_world(&ball_world.pos),
+                vel: f.vector_from_world(&ball_world.vel),
+                spin: ball_world.spin,
+            };
+            task_terms(&local, bounce, &mut terms);
+        }
+        (terms, paid)
+    }
+}

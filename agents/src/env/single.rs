@@ -1,0 +1,212 @@
+//! The single-serve environment and its episode ends.
+
+use serde::{Deserialize, Serialize};
+use sim::arena::{self, Side};
+use sim::model::Model;
+use sim::predict::BounceModel;
+use sim::rng::Rng;
+
+use crate::controller::apply_grip_floor;
+use crate::observation::{ObsBlock, Observer};
+
+use super::*;
+
+/// How a single-serve episode ends for training (docs/design.md §11): the official code ends it
+/// `TASK_DELAY_STEPS` after the ball left the paddle and `MISS_GRACE` after the planned strike
+/// without contact, besides the rules; evaluation plays every episode to its rules' end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EpisodeEnd {
+    /// The rules and the time limit only (evaluation).
+    #[default]
+    Rules,
+    /// Also the official code's early ends (training).
+    Training,
+}
+
+/// One step of the environment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transition {
+    /// Observation after the step.
+    pub obs: Vec<f64>,
+    /// Weighted reward.
+    pub reward: f64,
+    /// Its terms.
+    pub terms: RewardTerms,
+    /// The episode is over.
+    pub done: bool,
+    /// The robot has touched the ball (so far).
+    pub hit: bool,
+    /// The return was legal (so far; in a rally: a legal return by the learner in this step).
+    pub success: bool,
+}
+
+pub(crate) fn paddle_contact(report: &sim::episode::StepReport, side: Side) -> bool {
+    report
+        .events
+        .iter()
+        .any(|e| e.kind == sim::ContactKind::Paddle { owner: side })
+}
+
+/// The single-serve RL environment: actions in [−1, 1] through a controller, observations and rewards
+/// as above.
+pub struct Env {
+    /// The episode.
+    pub episode: sim::episode::SingleServe,
+    /// Observation builder.
+    pub observer: Observer,
+    /// Action → controls.
+    pub mapper: crate::controller::ActionMapper,
+    /// Reward weights.
+    pub weights: RewardWeights,
+    /// Serve distribution.
+    pub kind: sim::serve::ServeKind,
+    /// When an episode ends.
+    pub end: EpisodeEnd,
+    /// Least control of the grip muscles (see [`apply_grip_floor`]).
+    pub grip_floor: f64,
+    /// Balls recorded from rallies, served instead of `kind` in a fraction of episodes.
+    pub bank: Option<BallBank>,
+    obs: Vec<f64>,
+    ctrl: Vec<f64>,
+    bounce: BounceModel,
+    stroke: StrokeReward,
+    predicted_success: bool,
+}
+
+impl Env {
+    /// An environment for the robot `model`.
+    pub fn new(
+        model: std::sync::Arc<Model>,
+        config: &sim::config::ArenaConfig,
+        preset: sim::Preset,
+        controller: &crate::controller::ControllerSpec,
+        blocks: Vec<ObsBlock>,
+        weights: RewardWeights,
+        kind: sim::serve::ServeKind,
+    ) -> Result<Env, String> {
+        let episode = sim::episode::SingleServe::new(model.clone(), config, preset)?;
+        Ok(Env {
+            observer: Observer::new(&model, blocks, 0)
+                .with_bounce(BounceModel::for_table(&preset.table)),
+            mapper: crate::controller::ActionMapper::new(&model, controller),
+            ctrl: vec![0.0; model.actuators.len()],
+            episode,
+            weights,
+            kind,
+            end: EpisodeEnd::Rules,
+            grip_floor: 0.0,
+            bank: None,
+            obs: Vec::new(),
+            bounce: BounceModel::for_table(&preset.table),
+            stroke: StrokeReward::default(),
+            predicted_success: false,
+        })
+    }
+
+    /// Observation length.
+    pub fn obs_dim(&self) -> usize {
+        self.observer.size()
+    }
+
+    /// Action length.
+    pub fn action_dim(&self) -> usize {
+        self.mapper.action_dim()
+    }
+
+    /// The observation of the current state.
+    pub fn observation(&self) -> &[f64] {
+        &self.obs
+    }
+
+    /// A new episode from `seed`; returns the first observation.
+    pub fn reset(&mut self, seed: u64) -> Vec<f64> {
+        let (serve_seed, planner_seed) = crate::seeds::episode_seeds(seed, 0);
+        let mut rng = Rng::seeded(serve_seed);
+        match self.bank.as_ref().and_then(|b| b.draw(&mut rng)) {
+            Some(ball) => self.episode.reset_with(
+                sim::serve::Serve {
+                    ball,
+                    server: Side::B,
+                    receiver: Side::A,
+                    predicted_crossing: None,
+                },
+                None,
+            ),
+            None => self.episode.reset(self.kind, &mut rng, None),
+        }
+        self.observer.reset(planner_seed);
+        self.stroke = StrokeReward::default();
+        self.predicted_success = false;
+        let (robot, ball, t) = (
+            &self.episode.robot,
+            self.episode.world.ball,
+            self.episode.world.time,
+        );
+        self.observer.update_command(robot, &ball, t);
+        self.observer.observe(robot, &ball, t, &mut self.obs);
+        self.obs.clone()
+    }
+
+    /// Whether the return of this episode is judged legal: by the rules once the ball landed, or, in
+    /// a training episode that ended before, by the predicted landing.
+    pub fn success(&self) -> bool {
+        self.episode.success || (self.end == EpisodeEnd::Training && self.predicted_success)
+    }
+
+    /// One control step with `action` (entries clipped to [−1, 1]; a NaN or infinite entry ends the
+    /// episode with INVALID_ACTION and no reward).
+    pub fn step(&mut self, action: &[f64]) -> Transition {
+        if action.len() != self.action_dim() || action.iter().any(|a| !a.is_finite()) {
+            self.episode.invalid_action();
+            return Transition {
+                obs: self.obs.clone(),
+                reward: 0.0,
+                terms: RewardTerms::default(),
+                done: true,
+                hit: self.episode.hit,
+                success: false,
+            };
+        }
+        let model = self.episode.robot.held_model().clone();
+        self.ctrl.copy_from_slice(&self.episode.robot.state.ctrl);
+        self.mapper.controls(
+            &model,
+            &self.episode.robot.state,
+            action,
+            arena::CONTROL_DT,
+            &mut self.ctrl,
+        );
+        apply_grip_floor(&self.episode.robot, self.grip_floor, &mut self.ctrl);
+        self.episode.robot.state.ctrl.copy_from_slice(&self.ctrl);
+        let report = self.episode.step();
+        let robot = &self.episode.robot;
+        let ball = self.episode.world.ball;
+        let t = self.episode.world.time;
+        let contact = paddle_contact(&report, Side::A);
+        let plan = self.observer.command().map(|(p, _)| *p);
+        let strike_time = self.observer.command().map(|(_, t_hit)| *t_hit);
+        let (terms, judged) = self
+            .stroke
+            .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
+        if judged {
+            self.predicted_success = terms.landing > 0.0;
+        }
+        let mut done = report.done;
+        if self.end == EpisodeEnd::Training {
+            let missed =
+                !self.episode.hit && strike_time.is_some_and(|t_hit| t > t_hit + MISS_GRACE);
+            done |= judged || missed;
+        }
+        self.observer.update_command(robot, &ball, t);
+        self.observer.observe(robot, &ball, t, &mut self.obs);
+        Transition {
+            obs: self.obs.clone(),
+            reward: terms.total(&self.weights),
+            terms,
+            done,
+            hit: self.episode.hit,
+            success: self.success(),
+        }
+    }
+}

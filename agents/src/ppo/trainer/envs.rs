@@ -1,0 +1,156 @@
+//! The environments a training run steps: single serves or self-play rallies.
+
+use std::sync::Arc;
+
+use sim::config::ArenaConfig;
+use sim::model::Model;
+
+use crate::controller::ControllerSpec;
+use crate::env::{Env, EpisodeEnd, RallyEnv};
+use crate::observation::ObsBlock;
+use crate::ppo::{TrainConfig, TrainEnv};
+
+/// A training environment: a single serve (one robot) or a self-play rally (two).
+pub(super) enum TrainingEnv {
+    Single(Box<Env>),
+    Rally(Box<RallyEnv>),
+}
+
+/// What one robot's step gave.
+pub(super) struct AgentStep {
+    pub(super) reward: f64,
+    pub(super) done: bool,
+    /// The episode reached its time limit (or cap) rather than a terminal state.
+    pub(super) time_limit: bool,
+    pub(super) hit: bool,
+    pub(super) success: bool,
+    pub(super) rally_length: u32,
+    pub(super) dual: f64,
+    /// The position term, while the robot tracks a command before contact.
+    pub(super) tracking: Option<f64>,
+    /// ‖a‖₁/n_a after the step.
+    pub(super) activation: f64,
+}
+
+impl TrainingEnv {
+    pub(super) fn reset(&mut self, seed: u64) {
+        match self {
+            TrainingEnv::Single(e) => {
+                e.reset(seed);
+            }
+            TrainingEnv::Rally(e) => e.reset(seed),
+        }
+    }
+
+    pub(super) fn observe_into(&self, out: &mut Vec<f64>) {
+        match self {
+            TrainingEnv::Single(e) => out.extend_from_slice(e.observation()),
+            TrainingEnv::Rally(e) => {
+                out.extend_from_slice(e.observation(0));
+                out.extend_from_slice(e.observation(1));
+            }
+        }
+    }
+
+    /// One control step with the rows of `actions` (one per robot).
+    pub(super) fn step(&mut self, actions: &[Vec<f64>]) -> Vec<AgentStep> {
+        match self {
+            TrainingEnv::Single(env) => {
+                let tr = env.step(&actions[0]);
+                let tracking =
+                    (!tr.hit && env.observer.command().is_some()).then_some(tr.terms.position);
+                let time_limit = tr.done
+                    && env.episode.referee.end().is_none()
+                    && !tr.success
+                    && env.episode.steps >= env.episode.max_steps;
+                vec![AgentStep {
+                    reward: tr.reward,
+                    done: tr.done,
+                    time_limit,
+                    hit: tr.hit,
+                    success: tr.success,
+                    rally_length: tr.success as u32,
+                    dual: 0.0,
+                    tracking,
+                    activation: tr.terms.effort,
+                }]
+            }
+            TrainingEnv::Rally(env) => {
+                let trs = env.step([&actions[0], &actions[1]]);
+                let length = trs.iter().map(|t| t.returns).sum();
+                let capped = env.capped();
+                trs.iter()
+                    .map(|t| AgentStep {
+                        reward: t.step.reward,
+                        done: t.step.done,
+                        time_limit: t.step.done && capped,
+                        hit: t.step.hit,
+                        success: t.step.success,
+                        rally_length: length,
+                        dual: t.step.terms.dual,
+                        tracking: t.tracking,
+                        activation: t.step.terms.effort,
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// The ball bank `[bank] file` names, read once for every environment; `None` without a file.
+pub(super) fn read_bank(config: &TrainConfig) -> Result<Option<crate::env::BallBank>, String> {
+    let Some(file) = &config.bank.file else {
+        return Ok(None);
+    };
+    let text = std::fs::read_to_string(file).map_err(|e| format!("bank.file {file}: {e}"))?;
+    let balls = crate::env::BallBank::parse(&text).map_err(|e| format!("bank.file {file}: {e}"))?;
+    Ok(Some(crate::env::BallBank {
+        balls: balls.into(),
+        fraction: config.bank.fraction,
+    }))
+}
+
+/// The training environment a method runs in; its observation and action sizes.
+pub(super) fn make_env(
+    model: &Arc<Model>,
+    arena: &ArenaConfig,
+    controller: &ControllerSpec,
+    config: &TrainConfig,
+    bank: Option<&crate::env::BallBank>,
+) -> Result<(TrainingEnv, usize, usize), String> {
+    // Both environments: MyoChallenge contact laws, every observation block.
+    let (preset, blocks) = (sim::arena::MYOCHALLENGE, ObsBlock::ALL.to_vec());
+    let grip_floor = config.controller.grip_floor;
+    Ok(match config.env {
+        TrainEnv::Single => {
+            let kind = config.serve.kind();
+            let mut env = Env::new(
+                model.clone(),
+                arena,
+                preset,
+                controller,
+                blocks,
+                config.reward,
+                kind,
+            )?;
+            env.end = EpisodeEnd::Training;
+            env.grip_floor = grip_floor;
+            env.bank = bank.cloned();
+            let (o, a) = (env.obs_dim(), env.action_dim());
+            (TrainingEnv::Single(Box::new(env)), o, a)
+        }
+        TrainEnv::Rally => {
+            let mut env = RallyEnv::new(
+                model.clone(),
+                arena,
+                preset,
+                controller,
+                blocks,
+                config.reward,
+            )?;
+            env.grip_floor = grip_floor;
+            let (o, a) = (env.obs_dim(), env.action_dim());
+            (TrainingEnv::Rally(Box::new(env)), o, a)
+        }
+    })
+}
