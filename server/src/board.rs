@@ -7,9 +7,7 @@ use crate::{db, ratings, AppState};
 
 /// The leaderboard, recomputed when an agent or a finished match was added.
 pub async fn current_board(s: &AppState) -> anyhow::Result<Arc<ratings::Leaderboard>> {
-    let (agents_n, done): (i64, i64) = sqlx::query_as("SELECT (SELECT COUNT(*) FROM agents), (SELECT COUNT(*) FROM matches WHERE status = 'done')")
-        .fetch_one(&s.pool)
-        .await?;
+    let (agents_n, done) = db::board_key(&s.pool).await?;
     let mut cache = s.board.lock().await;
     if let Some((a, d, b)) = cache.as_ref() {
         if *a == agents_n as usize && *d == done {

@@ -277,7 +277,7 @@ async fn method_not_allowed(method: axum::http::Method) -> ApiError {
 }
 
 async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {
-    sqlx::query("SELECT 1").execute(&s.pool).await?;
+    db::ping(&s.pool).await?;
     Ok(Json(json!(wire::Health {
         status: "ok".into(),
         sim_version: sim::SIM_VERSION.into()
@@ -544,14 +544,8 @@ async fn leaderboard(State(s): State<AppState>) -> ApiResult<Json<Value>> {
 }
 
 async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {
-    let by_status: Vec<(String, i64)> =
-        sqlx::query_as("SELECT status, COUNT(*) FROM matches GROUP BY status")
-            .fetch_all(&s.pool)
-            .await?;
-    let (agents_n, rallies_n): (i64, i64) =
-        sqlx::query_as("SELECT (SELECT COUNT(*) FROM agents), (SELECT COUNT(*) FROM rallies)")
-            .fetch_one(&s.pool)
-            .await?;
+    let by_status: Vec<(String, i64)> = db::matches_by_status(&s.pool).await?;
+    let (agents_n, rallies_n): (i64, i64) = db::agent_and_rally_counts(&s.pool).await?;
     let mut out = String::new();
     out.push_str("# HELP rally_matches Matches by status.\n# TYPE rally_matches gauge\n");
     for st in ["queued", "running", "done", "failed", "cancelled"] {
@@ -560,11 +554,7 @@ async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {
     }
     out.push_str(&format!("# HELP rally_agents Registered agents.\n# TYPE rally_agents gauge\nrally_agents {agents_n}\n"));
     out.push_str(&format!("# HELP rally_rallies_total Rallies stored.\n# TYPE rally_rallies_total counter\nrally_rallies_total {rallies_n}\n"));
-    let tallies: Vec<(String, i64)> = sqlx::query_as(
-        "SELECT 'sprt_' || status, COUNT(*) FROM sprts GROUP BY status UNION ALL SELECT 'tournaments', COUNT(*) FROM tournaments",
-    )
-    .fetch_all(&s.pool)
-    .await?;
+    let tallies = db::contest_tallies(&s.pool).await?;
     out.push_str("# HELP rally_sprts SPRTs by status.\n# TYPE rally_sprts gauge\n");
     for st in [
         "running",

@@ -25,6 +25,7 @@ pub use crate::domain::{AgentKind, MatchStatus, SprtStatus, WorkerStatus};
 
 mod agents;
 mod contests;
+mod counts;
 mod matches;
 mod stats;
 mod tokens;
@@ -32,6 +33,7 @@ pub mod workers;
 
 pub use agents::*;
 pub use contests::*;
+pub use counts::*;
 pub use matches::*;
 pub use stats::*;
 pub use tokens::*;
