@@ -2,7 +2,6 @@
 
 use std::sync::Arc;
 
-
 use crate::checkpoint::{Checkpoint, ObservationSpec, Training, TrainingPoint, FORMAT, VERSION};
 use crate::observation::ObsBlock;
 use crate::ppo::{stream_seed, TrainEnv};
