@@ -10,8 +10,8 @@ RALLY="${RALLY:-cargo run --release --quiet --}"
 : "${RALLY_ADMIN_TOKEN:?set RALLY_ADMIN_TOKEN (the server admin token)}"
 NAME="example-$(date +%s)"
 
-echo "== submit $NAME (a zero-weight template; the server qualifies it on single-serve episodes)"
-$RALLY checkpoint template --hidden 32 --name "$NAME" > "/tmp/$NAME.json"
+echo "== submit $NAME (the built-in Diff-Muscle's checkpoint; the server qualifies it on single-serve episodes)"
+$RALLY checkpoint builtin kmac > "/tmp/$NAME.json"
 jq -n --arg n "$NAME" --slurpfile c "/tmp/$NAME.json" '{name: $n, checkpoint: $c[0]}' > "/tmp/$NAME.body.json"
 curl -sf -H "Authorization: Bearer $RALLY_ADMIN_TOKEN" -H 'Content-Type: application/json' \
   -d @"/tmp/$NAME.body.json" "$S/agents" > "/tmp/$NAME.reply.json"

@@ -222,3 +222,25 @@ fn model_choices_that_cannot_play_are_refused_with_what_to_do() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("no-such-file.xml"));
     let _ = std::fs::remove_dir_all(&empty);
 }
+
+#[test]
+fn a_builtin_checkpoint_prints_as_committed_and_an_unknown_name_is_a_usage_error() {
+    let out = rally(&["checkpoint", "builtin", "kmac"]);
+    assert!(out.status.success());
+    let committed = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/checkpoints/kmac.json"
+    ))
+    .unwrap();
+    assert_eq!(
+        String::from_utf8(out.stdout).unwrap().trim_end(),
+        committed.trim_end()
+    );
+    let bad = rally(&["checkpoint", "builtin", "nope"]);
+    assert_eq!(bad.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("no built-in checkpoint 'nope'") && err.contains("kmac-rally"),
+        "{err}"
+    );
+}

@@ -15,8 +15,8 @@ use server::ratings::Leaderboard;
 use server::tournament::ProgressState;
 use server::wire::{
     AgentCrossings, AgentDetail, AgentList, ErrorBody, Health, IssuedToken, MatchDetail, MatchList,
-    NewSprt, NewToken, NewTournament, QueueMatch, RatingHistory, SprtView, SubmitAgent, Submitted,
-    TournamentList, TournamentView,
+    NewSprt, NewToken, NewTournament, QualificationRule, QueueMatch, RatingHistory, SprtView,
+    SubmitAgent, Submitted, TournamentList, TournamentView,
 };
 
 mod common;
@@ -962,6 +962,55 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
     // And the server is still up.
     let (code, _) = call(a, "GET", "/api/v1/healthz", None, None);
     assert_eq!(code, 200);
+}
+
+#[test]
+fn junk_below_the_qualification_thresholds_is_refused_and_a_trained_agent_admitted() {
+    let dir = tempdir("admission");
+    let srv = start_with(
+        &dir,
+        false,
+        "builtin_checkpoints = \"\"\nqualification_min_hit_rate = 0.3\nqualification_max_dropped = 0.5\n\
+         max_body_bytes = 8388608\n",
+    );
+    let a = srv.addr.as_str();
+    // The rule is published.
+    let h: Health = get_as(a, "/api/v1/healthz");
+    let rule = QualificationRule {
+        episodes: 6,
+        min_hit_rate: 0.3,
+        max_dropped: 0.5,
+    };
+    assert_eq!(h.qualification, Some(rule));
+    // An untrained template hits nothing and drops its paddle: 422 with its figures, nothing stored.
+    let junk = json!({"name": "junk", "checkpoint": template("junk")});
+    let (code, v) = call(a, "POST", "/api/v1/agents", Some(&junk), Some(TOKEN));
+    assert_eq!(code, 422, "{v}");
+    assert_eq!(v["error"]["code"], "below_qualification", "{v}");
+    let msg = v["error"]["message"].as_str().unwrap();
+    assert!(
+        msg.contains("of 6 P2 serves") && msg.contains("at least 30% qualifies"),
+        "{msg}"
+    );
+    let list: AgentList = get_as(a, "/api/v1/agents");
+    assert!(list.agents.iter().all(|x| x.builtin), "{list:?}");
+    // The Diff-Muscle built-in's checkpoint, submitted as Mine2, passes; its report bears that name.
+    let kmac: Value =
+        serde_json::from_str(agents::builtins::checkpoint("kmac").expect("built in")).unwrap();
+    let (code, v) = call(
+        a,
+        "POST",
+        "/api/v1/agents",
+        Some(&json!({"name": "Mine2", "checkpoint": kmac})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 201, "{v}");
+    let sub: Submitted = serde_json::from_value(v).unwrap();
+    assert_eq!(
+        (sub.agent.name.as_str(), sub.qualification.agent.as_str()),
+        ("Mine2", "Mine2")
+    );
+    assert!(sub.qualification.hit_rate.value >= 0.3);
 }
 
 #[test]

@@ -60,6 +60,12 @@ pub struct Settings {
     pub max_rallies: u32,
     /// Qualification episodes run for a submitted agent.
     pub qualification_episodes: usize,
+    /// Least share of the qualification's P2 serves an agent must hit to be admitted.
+    #[serde(default = "default_min_hit_rate")]
+    pub qualification_min_hit_rate: f64,
+    /// Largest share of the qualification's episodes in which an agent may drop its paddle.
+    #[serde(default = "default_max_dropped")]
+    pub qualification_max_dropped: f64,
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
     /// Admin token (the `RALLY_ADMIN_TOKEN` environment variable overrides it); empty disables
@@ -102,6 +108,14 @@ pub struct Settings {
     /// `HOST:PID`.
     #[serde(default)]
     pub worker_name: String,
+}
+
+fn default_min_hit_rate() -> f64 {
+    0.3
+}
+
+fn default_max_dropped() -> f64 {
+    0.1
 }
 
 fn default_self_play_every() -> u32 {
@@ -210,6 +224,14 @@ impl Settings {
         }
         if s.qualification_episodes == 0 || s.qualification_episodes > 10_000 {
             return Err("qualification_episodes must be between 1 and 10000".into());
+        }
+        for (name, v) in [
+            ("qualification_min_hit_rate", s.qualification_min_hit_rate),
+            ("qualification_max_dropped", s.qualification_max_dropped),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(format!("{name} must be a share, from 0 to 1"));
+            }
         }
         Ok(s)
     }
@@ -417,6 +439,42 @@ pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
     })
 }
 
+/// Whether a qualification report clears the admission thresholds (`qualification_min_hit_rate`,
+/// `qualification_max_dropped`); `Err` gives the figures that fell short, for the 422 and the log.
+pub fn admits(settings: &Settings, r: &agents::eval::EvalReport) -> Result<(), String> {
+    let n = r.episodes.max(1);
+    let hits = (r.hit_rate.value * n as f64).round() as usize;
+    let dropped = r
+        .ends
+        .iter()
+        .find(|(end, _)| end == "DROPPED_PADDLE")
+        .map_or(0, |e| e.1);
+    let mut short = Vec::new();
+    if r.hit_rate.value < settings.qualification_min_hit_rate {
+        short.push(format!(
+            "it hit {hits} of {n} P2 serves ({:.1}%; at least {:.0}% qualifies)",
+            100.0 * r.hit_rate.value,
+            100.0 * settings.qualification_min_hit_rate
+        ));
+    }
+    let dropped_share = dropped as f64 / n as f64;
+    if dropped_share > settings.qualification_max_dropped {
+        short.push(format!(
+            "it dropped its paddle in {dropped} of {n} episodes ({:.1}%; at most {:.0}% qualifies)",
+            100.0 * dropped_share,
+            100.0 * settings.qualification_max_dropped
+        ));
+    }
+    if short.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "below the qualification thresholds: {}",
+            short.join("; ")
+        ))
+    }
+}
+
 /// Qualifies an agent on `qualification_episodes` P2 serves (seed 0), one qualification at a time
 /// (each one already uses every core). The outer error is the server's, the inner one the agent's.
 pub async fn qualify(
@@ -512,7 +570,10 @@ async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
             }
         };
         let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
-        let report = match qualify(state, spec).await? {
+        let report = match qualify(state, spec)
+            .await?
+            .and_then(|r| admits(&state.settings, &r).map(|()| r))
+        {
             Ok(r) => r,
             Err(e) => {
                 tracing::warn!(%name, "built-in checkpoint did not qualify: {e}");

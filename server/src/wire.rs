@@ -179,6 +179,21 @@ pub struct Health {
     pub status: String,
     /// The simulator version this server plays with.
     pub sim_version: String,
+    /// What a submission must reach to be admitted.
+    #[serde(default)]
+    pub qualification: Option<QualificationRule>,
+}
+
+/// The admission rule: a submission plays `episodes` P2 serves (seed 0) and must hit at least
+/// `min_hit_rate` of them and drop its paddle in at most `max_dropped` of them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct QualificationRule {
+    /// Qualification episodes.
+    pub episodes: usize,
+    /// Least share of serves hit.
+    pub min_hit_rate: f64,
+    /// Largest share of episodes with the paddle dropped.
+    pub max_dropped: f64,
 }
 
 /// `GET /agents`.

@@ -42,6 +42,12 @@ enum CheckpointCommand {
         #[arg(long, default_value = "template")]
         name: String,
     },
+    /// Print a built-in checkpoint (kmac, kmac-rally, muscle-ppo, muscle-pd, dynsyn) as JSON: a trained
+    /// policy of the built-in body to start from or to submit under another name.
+    Builtin {
+        /// Its name.
+        name: String,
+    },
     /// Check a checkpoint against the robot (`--model`); prints its shape, or the field that is wrong.
     Validate {
         /// Checkpoint file.
@@ -73,6 +79,16 @@ enum CheckpointCommand {
 pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
     let model = args.model.load()?.model;
     match &args.command {
+        CheckpointCommand::Builtin { name } => {
+            let text = agents::builtins::checkpoint(name).ok_or_else(|| {
+                CliError::Usage(format!(
+                    "no built-in checkpoint '{name}'; there are: {}",
+                    agents::builtins::names().join(", ")
+                ))
+            })?;
+            println!("{}", text.trim_end());
+            Ok(())
+        }
         CheckpointCommand::Template {
             controller,
             hidden,

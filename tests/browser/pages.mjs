@@ -35,6 +35,8 @@ continuous_rallies = 4
 continuous_pause_s = 0.0
 max_rallies = 1000
 qualification_episodes = 6
+qualification_min_hit_rate = 0.0
+qualification_max_dropped = 1.0
 max_body_bytes = 8388608
 admin_token = ""
 `);

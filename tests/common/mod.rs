@@ -78,19 +78,39 @@ pub fn start_with(dir: &Path, continuous: bool, extra: &str) -> Server {
 }
 
 /// Writes the test configuration (`workers` match workers in the server, leases of 4 s) to
-/// `dir/server.toml` and returns its path.
+/// `dir/server.toml` and returns its path. A setting in `extra` replaces the test default of the
+/// same name.
 pub fn write_config(dir: &Path, workers: usize, continuous: bool, extra: &str) -> PathBuf {
     let config = dir.join("server.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "addr = \"127.0.0.1:0\"\ndb = \"{}\"\nworkers = {workers}\ncontinuous = {continuous}\ncontinuous_rallies = 4\n\
-             continuous_pause_s = 0.0\nmax_rallies = 1000\nqualification_episodes = 6\nmax_body_bytes = 65536\nadmin_token = \"\"\n\
-             lease_s = 4.0\n{extra}",
-            db(dir)
-        ),
-    )
-    .unwrap();
+    let defaults = [
+        ("addr", "\"127.0.0.1:0\"".to_string()),
+        ("db", format!("\"{}\"", db(dir))),
+        ("workers", workers.to_string()),
+        ("continuous", continuous.to_string()),
+        ("continuous_rallies", "4".into()),
+        ("continuous_pause_s", "0.0".into()),
+        ("max_rallies", "1000".into()),
+        ("qualification_episodes", "6".into()),
+        // The tests submit untrained templates: no admission thresholds unless a test sets them.
+        ("qualification_min_hit_rate", "0.0".into()),
+        ("qualification_max_dropped", "1.0".into()),
+        ("max_body_bytes", "65536".into()),
+        ("admin_token", "\"\"".into()),
+        ("lease_s", "4.0".into()),
+    ];
+    let given: Vec<&str> = extra
+        .lines()
+        .filter_map(|l| l.split('=').next())
+        .map(str::trim)
+        .collect();
+    let mut text = String::new();
+    for (key, value) in defaults {
+        if !given.contains(&key) {
+            text.push_str(&format!("{key} = {value}\n"));
+        }
+    }
+    text.push_str(extra);
+    std::fs::write(&config, text).unwrap();
     config
 }
 

@@ -127,9 +127,15 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         })?;
     charge(&s, caller, Budget::Agents, 1)?;
     let spec = ::agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
-    let report = crate::qualify(&s, spec).await?.map_err(|e| ApiError {
+    let mut report = crate::qualify(&s, spec).await?.map_err(|e| ApiError {
         field: Some("checkpoint"),
         ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
+    })?;
+    // The report names the agent as submitted (not the checkpoint's inner name).
+    report.agent = body.name.clone();
+    crate::admits(&s.settings, &report).map_err(|e| ApiError {
+        field: Some("checkpoint"),
+        ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "below_qualification", e)
     })?;
     let qual = (
         report.episodes,

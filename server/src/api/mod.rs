@@ -280,7 +280,12 @@ async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {
     db::ping(&s.pool).await?;
     Ok(Json(json!(wire::Health {
         status: "ok".into(),
-        sim_version: sim::SIM_VERSION.into()
+        sim_version: sim::SIM_VERSION.into(),
+        qualification: Some(wire::QualificationRule {
+            episodes: s.settings.qualification_episodes,
+            min_hit_rate: s.settings.qualification_min_hit_rate,
+            max_dropped: s.settings.qualification_max_dropped,
+        }),
     })))
 }
 
