@@ -1014,6 +1014,41 @@ fn junk_below_the_qualification_thresholds_is_refused_and_a_trained_agent_admitt
 }
 
 #[test]
+fn a_validation_past_its_budget_is_refused_and_the_server_keeps_answering() {
+    // An ONNX checkpoint (tract optimises its graph to validate it) under a 1 ms budget.
+    use base64::Engine;
+    let dir = tempdir("budget");
+    let srv = start_with(
+        &dir,
+        false,
+        "builtin_checkpoints = \"\"\nvalidation_budget_s = 0.001\nmax_body_bytes = 8388608\n",
+    );
+    let a = srv.addr.as_str();
+    let mut ck = template("slow");
+    ck.as_object_mut().unwrap().remove("policy");
+    ck["onnx"] = json!({"model_base64": base64::engine::general_purpose::STANDARD
+        .encode(include_bytes!("../agents/tests/fixtures/policy.onnx"))});
+    let body = json!({"name": "slow", "checkpoint": ck});
+    let (code, v) = call(a, "POST", "/api/v1/agents", Some(&body), Some(TOKEN));
+    assert_eq!(code, 422, "{v}");
+    assert_eq!(v["error"]["code"], "over_budget", "{v}");
+    assert!(
+        v["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("validation_budget_s"),
+        "{v}"
+    );
+    let (code, _) = call(a, "GET", "/api/v1/healthz", None, None);
+    assert_eq!(code, 200);
+    let list: AgentList = get_as(a, "/api/v1/agents");
+    assert!(
+        list.agents.iter().all(|x| x.builtin),
+        "nothing stored: {list:?}"
+    );
+}
+
+#[test]
 fn slow_clients_are_cut_at_the_header_timeout_and_connections_are_capped() {
     // Four connections (the cap) that never finish their headers hold every slot: a fifth client
     // waits until the header-read timeout (1 s) closes them, then is served.

@@ -66,6 +66,11 @@ pub struct Settings {
     /// Largest share of the qualification's episodes in which an agent may drop its paddle.
     #[serde(default = "default_max_dropped")]
     pub qualification_max_dropped: f64,
+    /// The longest a submitted checkpoint's validation (parsing, checking, building its network —
+    /// an ONNX graph is optimised by tract) may take, waiting for its turn included, s: past it the
+    /// submission is refused (422 naming this setting).
+    #[serde(default = "default_validation_budget_s")]
+    pub validation_budget_s: f64,
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
     /// Admin token (the `RALLY_ADMIN_TOKEN` environment variable overrides it); empty disables
@@ -108,6 +113,10 @@ pub struct Settings {
     /// `HOST:PID`.
     #[serde(default)]
     pub worker_name: String,
+}
+
+fn default_validation_budget_s() -> f64 {
+    10.0
 }
 
 fn default_min_hit_rate() -> f64 {
@@ -200,6 +209,7 @@ impl Settings {
         for (name, v) in [
             ("header_read_timeout_s", s.header_read_timeout_s),
             ("shutdown_deadline_s", s.shutdown_deadline_s),
+            ("validation_budget_s", s.validation_budget_s),
         ] {
             if !(v.is_finite() && v > 0.0 && v <= 86_400.0) {
                 return Err(format!(
@@ -328,6 +338,8 @@ pub struct AppState {
     pub rate: Arc<std::sync::Mutex<RateLog>>,
     /// One qualification at a time: submissions wait their turn instead of piling up on the CPU.
     pub qualify: Arc<tokio::sync::Semaphore>,
+    /// One checkpoint validation at a time, off the async threads ([`validate_checkpoint`]).
+    pub validate: Arc<tokio::sync::Semaphore>,
     /// What changed, for the event stream's subscribers.
     pub events: tokio::sync::broadcast::Sender<ServerEvent>,
     /// Running matches that can be watched live: the frames of the rally being played (with body
@@ -433,10 +445,49 @@ pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
         board: Arc::new(tokio::sync::Mutex::new(None)),
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
         qualify: Arc::new(tokio::sync::Semaphore::new(1)),
+        validate: Arc::new(tokio::sync::Semaphore::new(1)),
         events: tokio::sync::broadcast::channel(EVENT_BUFFER).0,
         live: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),
     })
+}
+
+/// Why [`validate_checkpoint`] refused.
+#[derive(Debug)]
+pub enum Refused {
+    /// The checkpoint is wrong: the field and what.
+    Invalid(agents::checkpoint::CheckpointError),
+    /// Validation ran past `validation_budget_s`.
+    OverBudget(f64),
+}
+
+/// Parses and validates a submitted checkpoint against the server's model on the blocking pool,
+/// one at a time, within `validation_budget_s` (its turn included). Past the budget the caller gets
+/// [`Refused::OverBudget`] at once; the work itself cannot be interrupted and finishes on its
+/// thread, holding the turn, so a flood of slow uploads queues rather than piling onto the CPU.
+pub async fn validate_checkpoint(
+    state: &AppState,
+    text: String,
+) -> anyhow::Result<Result<agents::checkpoint::Checkpoint, Refused>> {
+    let budget = state.settings.validation_budget_s;
+    let turn = state.validate.clone();
+    let model = state.model.clone();
+    let job = async move {
+        let permit = turn
+            .acquire_owned()
+            .await
+            .map_err(|e| anyhow::anyhow!("validation queue closed: {e}"))?;
+        tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            agents::checkpoint::Checkpoint::from_json(&text, &model)
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("checkpoint validation panicked: {e}"))
+    };
+    match tokio::time::timeout(std::time::Duration::from_secs_f64(budget), job).await {
+        Err(_) => Ok(Err(Refused::OverBudget(budget))),
+        Ok(r) => Ok(r?.map_err(Refused::Invalid)),
+    }
 }
 
 /// Whether a qualification report clears the admission thresholds (`qualification_min_hit_rate`,

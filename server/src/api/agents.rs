@@ -116,15 +116,32 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         return Err(ApiError::name_taken("an agent", &a.name));
     }
     let text = body.checkpoint.to_string();
-    let checkpoint =
-        ::agents::checkpoint::Checkpoint::from_json(&text, &s.model).map_err(|e| ApiError {
-            field: Some("checkpoint"),
-            ..ApiError::new(
-                StatusCode::UNPROCESSABLE_ENTITY,
-                "invalid_checkpoint",
-                e.to_string(),
-            )
-        })?;
+    let checkpoint = match crate::validate_checkpoint(&s, text.clone()).await? {
+        Ok(c) => c,
+        Err(crate::Refused::Invalid(e)) => {
+            return Err(ApiError {
+                field: Some("checkpoint"),
+                ..ApiError::new(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    "invalid_checkpoint",
+                    e.to_string(),
+                )
+            })
+        }
+        Err(crate::Refused::OverBudget(budget)) => {
+            return Err(ApiError {
+                field: Some("checkpoint"),
+                ..ApiError::new(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    "over_budget",
+                    format!(
+                        "validating the checkpoint (building its network) took longer than the \
+                         server's validation_budget_s ({budget} s)"
+                    ),
+                )
+            })
+        }
+    };
     charge(&s, caller, Budget::Agents, 1)?;
     let spec = ::agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
     let mut report = crate::qualify(&s, spec).await?.map_err(|e| ApiError {
