@@ -1,0 +1,223 @@
+//! The server's settings (`config/default.toml`), their defaults and checks.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use serde::Deserialize;
+
+use crate::db;
+
+/// The default settings file, `config/default.toml`.
+pub const DEFAULT_SETTINGS_TOML: &str = include_str!("../../config/default.toml");
+
+/// Server settings (`config/default.toml`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Listen address.
+    pub addr: SocketAddr,
+    /// The store: an SQLite file (created if missing) or a `postgres://` URL (db::Location).
+    pub db: db::Location,
+    /// Match workers (each a blocking thread).
+    pub workers: usize,
+    /// Keep scheduling matches between the agents with the fewest matches when the queue is empty.
+    pub continuous: bool,
+    /// Rallies per match scheduled by the continuous mode.
+    pub continuous_rallies: u32,
+    /// Least time between two matches queued by the continuous mode, s.
+    pub continuous_pause_s: f64,
+    /// Every this many matches, continuous mode queues a cooperative one: an agent against itself
+    /// (it rates nothing; it fills the rally-length and drift statistics, which a strong agent's
+    /// matches against weak ones leave short). 0: never.
+    #[serde(default = "default_self_play_every")]
+    pub continuous_self_play_every: u32,
+    /// Most rallies a requested match may have.
+    pub max_rallies: u32,
+    /// Qualification episodes run for a submitted agent.
+    pub qualification_episodes: usize,
+    /// Least share of the qualification's P2 serves an agent must hit to be admitted.
+    #[serde(default = "default_min_hit_rate")]
+    pub qualification_min_hit_rate: f64,
+    /// Largest share of the qualification's episodes in which an agent may drop its paddle.
+    #[serde(default = "default_max_dropped")]
+    pub qualification_max_dropped: f64,
+    /// The longest a submitted checkpoint's validation (parsing, checking, building its network —
+    /// an ONNX graph is optimised by tract) may take, waiting for its turn included, s: past it the
+    /// submission is refused (422 naming this setting).
+    #[serde(default = "default_validation_budget_s")]
+    pub validation_budget_s: f64,
+    /// Largest request body, bytes.
+    pub max_body_bytes: usize,
+    /// Admin token (the `RALLY_ADMIN_TOKEN` environment variable overrides it); empty disables
+    /// submissions.
+    pub admin_token: String,
+    /// Matches a submitter token may queue per minute (plain matches, tournaments' and SPRTs'
+    /// first ones); the admin token is not limited.
+    #[serde(default = "default_matches_per_minute")]
+    pub max_matches_per_minute: u32,
+    /// Most matches one tournament may queue.
+    #[serde(default = "default_tournament_matches")]
+    pub max_tournament_matches: u32,
+    /// Agents a submitter token may submit per hour (each one is qualified on
+    /// `qualification_episodes` episodes); the admin token is not limited.
+    #[serde(default = "default_agents_per_hour")]
+    pub max_agents_per_hour: u32,
+    /// The checkpoints registered as built-in agents on start, qualified like submissions:
+    /// [`EMBEDDED_BUILTINS`] (the default) for those compiled into the binary, whatever directory
+    /// it starts in; else a directory of `NAME.json` files; empty: none. One that does not load is
+    /// skipped with a warning.
+    #[serde(default = "default_builtin_checkpoints")]
+    pub builtin_checkpoints: PathBuf,
+    /// How long a running match's lease lasts without a heartbeat, s: a worker that died or lost
+    /// the database loses its matches after this long (they are queued again). Heartbeats come
+    /// every quarter of it.
+    #[serde(default = "default_lease_s")]
+    pub lease_s: f64,
+    /// HTTP connections open at once; more wait in the kernel's backlog.
+    #[serde(default = "default_max_connections")]
+    pub max_connections: usize,
+    /// How long a client may take to send a request's headers, s (also the longest a keep-alive
+    /// connection waits idle for its next request): past it, the connection is closed.
+    #[serde(default = "default_header_read_timeout_s")]
+    pub header_read_timeout_s: f64,
+    /// How long a shutdown (SIGTERM, Ctrl-C) waits for open HTTP connections (live streams, slow
+    /// clients) before closing them, s. Running matches are finished and stored either way.
+    #[serde(default = "default_shutdown_deadline_s")]
+    pub shutdown_deadline_s: f64,
+    /// This process's worker name in the `workers` table and the matches it plays; empty:
+    /// `HOST:PID`.
+    #[serde(default)]
+    pub worker_name: String,
+}
+
+fn default_validation_budget_s() -> f64 {
+    10.0
+}
+
+fn default_min_hit_rate() -> f64 {
+    0.3
+}
+
+fn default_max_dropped() -> f64 {
+    0.1
+}
+
+fn default_self_play_every() -> u32 {
+    3
+}
+
+fn default_lease_s() -> f64 {
+    20.0
+}
+
+fn default_max_connections() -> usize {
+    1024
+}
+
+fn default_header_read_timeout_s() -> f64 {
+    10.0
+}
+
+fn default_shutdown_deadline_s() -> f64 {
+    10.0
+}
+
+impl Settings {
+    /// The lease of a claimed match, ms.
+    pub fn lease_ms(&self) -> i64 {
+        (self.lease_s * 1000.0).round() as i64
+    }
+
+    /// This process's worker name (`worker_name`, or `HOST:PID`).
+    pub fn worker(&self) -> String {
+        if self.worker_name.is_empty() {
+            format!("{}:{}", hostname(), std::process::id())
+        } else {
+            self.worker_name.clone()
+        }
+    }
+}
+
+/// This machine's name (Linux: the kernel's; else `HOSTNAME`, else "localhost").
+pub fn hostname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().to_string())
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "localhost".into())
+}
+
+/// `builtin_checkpoints = "embedded"`: the checkpoints compiled into the binary
+/// ([`agents::builtins`]).
+pub const EMBEDDED_BUILTINS: &str = "embedded";
+
+fn default_builtin_checkpoints() -> PathBuf {
+    PathBuf::from(EMBEDDED_BUILTINS)
+}
+
+fn default_agents_per_hour() -> u32 {
+    30
+}
+
+fn default_matches_per_minute() -> u32 {
+    600
+}
+
+fn default_tournament_matches() -> u32 {
+    2000
+}
+
+impl Settings {
+    /// Parses settings, naming the field that is wrong.
+    pub fn from_toml(text: &str) -> Result<Settings, String> {
+        let s: Settings = toml::from_str(text).map_err(|e| e.to_string())?;
+        if s.workers > 64 {
+            return Err("workers must be between 0 (serve the API alone) and 64".into());
+        }
+        if !(s.lease_s.is_finite() && s.lease_s >= 1.0) {
+            return Err("lease_s must be at least 1 second".into());
+        }
+        if s.max_connections == 0 {
+            return Err("max_connections must be positive".into());
+        }
+        for (name, v) in [
+            ("header_read_timeout_s", s.header_read_timeout_s),
+            ("shutdown_deadline_s", s.shutdown_deadline_s),
+            ("validation_budget_s", s.validation_budget_s),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 86_400.0) {
+                return Err(format!(
+                    "{name} must be a positive number of seconds (at most a day)"
+                ));
+            }
+        }
+        if s.max_rallies == 0 || s.continuous_rallies == 0 || s.continuous_rallies > s.max_rallies {
+            return Err("max_rallies and continuous_rallies must be positive, continuous_rallies ≤ max_rallies".into());
+        }
+        if !(s.continuous_pause_s.is_finite() && s.continuous_pause_s >= 0.0) {
+            return Err("continuous_pause_s must be a non-negative number of seconds".into());
+        }
+        if s.max_matches_per_minute == 0 {
+            return Err("max_matches_per_minute must be positive".into());
+        }
+        if s.max_agents_per_hour == 0 {
+            return Err("max_agents_per_hour must be positive".into());
+        }
+        if s.max_tournament_matches == 0 {
+            return Err("max_tournament_matches must be positive".into());
+        }
+        if s.qualification_episodes == 0 || s.qualification_episodes > 10_000 {
+            return Err("qualification_episodes must be between 1 and 10000".into());
+        }
+        for (name, v) in [
+            ("qualification_min_hit_rate", s.qualification_min_hit_rate),
+            ("qualification_max_dropped", s.qualification_max_dropped),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(format!("{name} must be a share, from 0 to 1"));
+            }
+        }
+        Ok(s)
+    }
+}

@@ -1,0 +1,218 @@
+//! `rally bench server`: a real server, its matches per hour and its answers under load.
+
+use super::*;
+
+/// A keep-alive HTTP/1.1 client for GET requests with a `Content-Length` answer (the server's JSON).
+pub(super) struct KeepAlive {
+    reader: std::io::BufReader<std::net::TcpStream>,
+    host: String,
+}
+
+impl KeepAlive {
+    fn connect(addr: &str) -> anyhow::Result<KeepAlive> {
+        let s = std::net::TcpStream::connect(addr)?;
+        s.set_nodelay(true)?;
+        s.set_read_timeout(Some(Duration::from_secs(30)))?;
+        Ok(KeepAlive {
+            reader: std::io::BufReader::new(s),
+            host: addr.to_string(),
+        })
+    }
+
+    /// GETs `path`; returns the status.
+    fn get(&mut self, path: &str) -> anyhow::Result<u16> {
+        use std::io::{BufRead, Read, Write};
+        let req = format!("GET {path} HTTP/1.1\r\nHost: {}\r\n\r\n", self.host);
+        self.reader.get_mut().write_all(req.as_bytes())?;
+        let mut line = String::new();
+        self.reader.read_line(&mut line)?;
+        let status: u16 = line
+            .split_whitespace()
+            .nth(1)
+            .and_then(|s| s.parse().ok())
+            .ok_or_else(|| anyhow!("bad status line {line:?}"))?;
+        let mut len = 0usize;
+        loop {
+            line.clear();
+            self.reader.read_line(&mut line)?;
+            if line == "\r\n" || line.is_empty() {
+                break;
+            }
+            if let Some((k, v)) = line.split_once(':') {
+                if k.eq_ignore_ascii_case("content-length") {
+                    len = v.trim().parse()?;
+                }
+            }
+        }
+        let mut body = vec![0u8; len];
+        self.reader.read_exact(&mut body)?;
+        Ok(status)
+    }
+}
+
+/// Requests per second and latency quantiles of `path` with `clients` keep-alive clients.
+pub(super) fn load(
+    addr: &str,
+    path: &str,
+    clients: usize,
+    seconds: f64,
+) -> anyhow::Result<(f64, f64, f64)> {
+    let t0 = Instant::now();
+    let budget = Duration::from_secs_f64(seconds);
+    let lat: Vec<Vec<f64>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..clients)
+            .map(|_| {
+                s.spawn(|| -> anyhow::Result<Vec<f64>> {
+                    let mut c = KeepAlive::connect(addr)?;
+                    let mut out = Vec::new();
+                    while t0.elapsed() < budget {
+                        let t = Instant::now();
+                        let status = c.get(path)?;
+                        anyhow::ensure!(status == 200, "{path} answered {status}");
+                        out.push(t.elapsed().as_secs_f64());
+                    }
+                    Ok(out)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().map_err(|_| anyhow!("a load client panicked"))?)
+            .collect::<anyhow::Result<Vec<_>>>()
+    })?;
+    let wall = t0.elapsed().as_secs_f64();
+    let mut all: Vec<f64> = lat.into_iter().flatten().collect();
+    all.sort_by(f64::total_cmp);
+    anyhow::ensure!(!all.is_empty(), "no request finished");
+    let q = |p: f64| all[((all.len() - 1) as f64 * p).round() as usize];
+    Ok((all.len() as f64 / wall, q(0.5), q(0.99)))
+}
+
+/// The admin token of the server the benchmark starts.
+pub(crate) const BENCH_TOKEN: &str = "rally-bench-admin";
+
+pub(crate) fn call_json(
+    addr: &str,
+    method: &str,
+    path: &str,
+    body: &str,
+) -> anyhow::Result<serde_json::Value> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr)?;
+    write!(
+        s,
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nAuthorization: Bearer {BENCH_TOKEN}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )?;
+    let mut resp = String::new();
+    s.read_to_string(&mut resp)?;
+    let body = resp.split_once("\r\n\r\n").map(|x| x.1).unwrap_or("");
+    Ok(serde_json::from_str(body)?)
+}
+
+pub(super) fn proc_status_kib(pid: u32, key: &str) -> Option<f64> {
+    let text = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = text.lines().find(|l| l.starts_with(key))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// `rally bench server`: a real server (this binary, `serve`, fresh database, 2 workers, no
+/// continuous mode) measured from outside: matches per hour, then leaderboard and health-check
+/// throughput and latency while two long matches run, then the server's peak memory.
+pub fn server_bench(seconds: f64, clients: usize) -> anyhow::Result<serde_json::Value> {
+    use std::io::BufRead;
+    let dir = std::env::temp_dir().join(format!("rally-bench-server-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    let mut child = Command::new(std::env::current_exe()?)
+        .args([
+            "serve",
+            "--addr",
+            "127.0.0.1:0",
+            "--workers",
+            "2",
+            "--no-continuous",
+            "--db",
+        ])
+        .arg(dir.join("bench.db"))
+        .env("RUST_LOG", "warn")
+        .env("RALLY_ADMIN_TOKEN", BENCH_TOKEN)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .context("starting rally serve")?;
+    let result = (|| -> anyhow::Result<serde_json::Value> {
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().context("stdout")?).read_line(&mut line)?;
+        let addr = line
+            .trim()
+            .strip_prefix("listening on http://")
+            .ok_or_else(|| anyhow!("unexpected first line {line:?}"))?
+            .to_string();
+        // Matches per hour: 12 matches of 20 rallies between the built-ins, 2 workers.
+        let pairs = [(1, 2), (2, 3), (3, 1)];
+        let t0 = Instant::now();
+        let mut ids = Vec::new();
+        for k in 0..12 {
+            let (a, b) = pairs[k % 3];
+            let m = call_json(
+                &addr,
+                "POST",
+                "/api/v1/matches",
+                &format!("{{\"a\":{a},\"b\":{b},\"rallies\":20,\"seed\":{k}}}"),
+            )?;
+            ids.push(
+                m["id"]
+                    .as_i64()
+                    .ok_or_else(|| anyhow!("queueing failed: {m}"))?,
+            );
+        }
+        loop {
+            let done = call_json(&addr, "GET", "/api/v1/matches?status=done&limit=1000", "")?;
+            if done["matches"].as_array().map_or(0, |m| m.len()) >= ids.len() {
+                break;
+            }
+            anyhow::ensure!(
+                t0.elapsed() < Duration::from_secs(600),
+                "matches did not finish in 10 minutes"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let per_hour = ids.len() as f64 / t0.elapsed().as_secs_f64() * 3600.0;
+        // Two long matches keep both workers busy during the load.
+        let mut long = Vec::new();
+        for (a, b) in [(1, 2), (3, 1)] {
+            let m = call_json(
+                &addr,
+                "POST",
+                "/api/v1/matches",
+                &format!("{{\"a\":{a},\"b\":{b},\"rallies\":1000,\"seed\":99}}"),
+            )?;
+            long.push(m["id"].as_i64().unwrap_or(0));
+        }
+        std::thread::sleep(Duration::from_millis(300));
+        let running = call_json(&addr, "GET", "/api/v1/matches?status=running", "")?;
+        let running = running["matches"].as_array().map_or(0, |m| m.len());
+        let board = load(&addr, "/api/v1/leaderboard", clients, seconds)?;
+        let health = load(&addr, "/api/v1/healthz", clients, seconds)?;
+        for id in long {
+            let _ = call_json(&addr, "DELETE", &format!("/api/v1/matches/{id}"), "");
+        }
+        let pid = child.id();
+        Ok(json!({
+            "target": "server",
+            "workers": 2,
+            "clients": clients,
+            "matches_per_hour_20_rallies": per_hour,
+            "matches_running_during_load": running,
+            "leaderboard": {"requests_per_second": board.0, "p50_ms": board.1 * 1e3, "p99_ms": board.2 * 1e3},
+            "healthz": {"requests_per_second": health.0, "p50_ms": health.1 * 1e3, "p99_ms": health.2 * 1e3},
+            "leaderboard_vs_healthz_throughput": board.0 / health.0,
+            "server_peak_rss_mib": proc_status_kib(pid, "VmHWM:").map(|k| k / 1024.0),
+            "server_rss_mib": proc_status_kib(pid, "VmRSS:").map(|k| k / 1024.0),
+        }))
+    })();
+    let _ = child.kill();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
