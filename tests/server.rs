@@ -1049,6 +1049,71 @@ fn a_validation_past_its_budget_is_refused_and_the_server_keeps_answering() {
 }
 
 #[test]
+fn owners_retire_agents_which_keep_their_matches_and_play_no_new_ones() {
+    let dir = tempdir("retire");
+    let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    let lab = |name: &str| NewToken { name: name.into() };
+    let owner: IssuedToken = post_as(a, "/api/v1/tokens", &lab("owner"), Some(TOKEN), 201);
+    let other: IssuedToken = post_as(a, "/api/v1/tokens", &lab("other"), Some(TOKEN), 201);
+    let policy = SubmitAgent {
+        name: "old-policy".into(),
+        checkpoint: template("old"),
+    };
+    let sub: Submitted = post_as(a, "/api/v1/agents", &policy, Some(&owner.token), 201);
+    let id = sub.agent.id;
+    let q = json!({"a": id, "b": "scripted", "rallies": 2, "seed": 3});
+    let (code, m) = call(a, "POST", "/api/v1/matches", Some(&q), Some(&owner.token));
+    assert_eq!(code, 202, "{m}");
+    let played = m["id"].as_i64().unwrap();
+    wait_for(a, played, "done", Duration::from_secs(120));
+    let path = format!("/api/v1/agents/{id}");
+    // Only its owner or the admin may retire it, once.
+    let (code, v) = call(a, "DELETE", &path, None, Some(&other.token));
+    assert_eq!(
+        (code, v["error"]["code"].as_str()),
+        (403, Some("not_owner")),
+        "{v}"
+    );
+    let (code, v) = call(a, "DELETE", &path, None, Some(&owner.token));
+    assert_eq!(code, 200, "{v}");
+    assert!(v["retired_at"].is_string(), "{v}");
+    let (code, v) = call(a, "DELETE", &path, None, Some(TOKEN));
+    assert_eq!(
+        (code, v["error"]["code"].as_str()),
+        (409, Some("retired")),
+        "{v}"
+    );
+    // Hidden from the list and the leaderboard; shown with ?all=1; its page and match stay.
+    let list: AgentList = get_as(a, "/api/v1/agents");
+    assert!(list.agents.iter().all(|x| x.id != id), "{list:?}");
+    let all: AgentList = get_as(a, "/api/v1/agents?all=1");
+    assert!(all
+        .agents
+        .iter()
+        .any(|x| x.id == id && x.retired_at.is_some()));
+    let (code, _) = call(a, "GET", "/api/v1/agents?all=maybe", None, None);
+    assert_eq!(code, 400);
+    let board: Leaderboard = get_as(a, "/api/v1/leaderboard");
+    assert!(board.rows.iter().all(|r| r.agent_id != id), "{board:?}");
+    assert!(board.rows.iter().enumerate().all(|(i, r)| r.rank == i + 1));
+    let (code, _) = call(a, "GET", &path, None, None);
+    assert_eq!(code, 200);
+    let (code, _) = call(a, "GET", &format!("/api/v1/matches/{played}"), None, None);
+    assert_eq!(code, 200);
+    // Naming it in a new match, by id or by name, is refused.
+    for named in [json!(id), json!("old-policy")] {
+        let q = json!({"a": named, "b": "scripted", "rallies": 2});
+        let (code, v) = call(a, "POST", "/api/v1/matches", Some(&q), Some(&owner.token));
+        assert_eq!(
+            (code, v["error"]["code"].as_str()),
+            (409, Some("retired")),
+            "{v}"
+        );
+    }
+}
+
+#[test]
 fn slow_clients_are_cut_at_the_header_timeout_and_connections_are_capped() {
     // Four connections (the cap) that never finish their headers hold every slot: a fifth client
     // waits until the header-read timeout (1 s) closes them, then is served.

@@ -5,7 +5,8 @@ use std::sync::Arc;
 
 use crate::{db, ratings, AppState};
 
-/// The leaderboard, recomputed when an agent or a finished match was added.
+/// The leaderboard (retired agents left out), recomputed when an agent was added or retired or a
+/// match finished.
 pub async fn current_board(s: &AppState) -> anyhow::Result<Arc<ratings::Leaderboard>> {
     let (agents_n, done) = db::board_key(&s.pool).await?;
     let mut cache = s.board.lock().await;
@@ -31,7 +32,14 @@ pub async fn current_board(s: &AppState) -> anyhow::Result<Arc<ratings::Leaderbo
     let board = Arc::new(
         tokio::task::spawn_blocking(move || {
             let entrants: Vec<ratings::Entrant> = agents.iter().map(Into::into).collect();
-            ratings::leaderboard(&entrants, &outcomes, &extras)
+            let mut board = ratings::leaderboard(&entrants, &outcomes, &extras);
+            // Retired agents' matches still rate the others; their rows are not shown.
+            let retired = |id: i64| agents.iter().any(|a| a.id == id && a.retired_at.is_some());
+            board.rows.retain(|r| !retired(r.agent_id));
+            for (i, r) in board.rows.iter_mut().enumerate() {
+                r.rank = i + 1;
+            }
+            board
         })
         .await
         .map_err(|e| anyhow::anyhow!("{e}"))?,

@@ -74,6 +74,7 @@ mod tests {
             hit_rate: None,
             success_rate: None,
             effort: None,
+            retired_at: None,
         };
         assert_eq!(keys("Agent"), fields(serde_json::to_value(a).unwrap()));
     }

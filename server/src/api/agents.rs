@@ -2,10 +2,62 @@
 
 use super::*;
 
-pub(super) async fn list_agents(State(s): State<AppState>) -> ApiResult<Json<Value>> {
-    Ok(Json(json!(wire::AgentList {
-        agents: db::agents(&s.pool).await?
-    })))
+/// `GET /agents`: the agents that play; `?all=1` the retired ones too.
+pub(super) async fn list_agents(
+    State(s): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
+) -> ApiResult<Json<Value>> {
+    only_params(&q, &["all"])?;
+    let all = match q.get("all").map(String::as_str) {
+        None | Some("0") | Some("false") => false,
+        Some("1") | Some("true") => true,
+        Some(x) => {
+            return Err(ApiError::bad(
+                "all",
+                format!("all must be 1 or 0, not '{x}'"),
+            ))
+        }
+    };
+    let mut agents = db::agents(&s.pool).await?;
+    agents.retain(|a| all || a.retired_at.is_none());
+    Ok(Json(json!(wire::AgentList { agents })))
+}
+
+/// `DELETE /agents/{id}`: retires the agent (its owner's token or the admin's). It keeps its row,
+/// matches and replays; it is no longer scheduled, named in new matches, or listed by default.
+pub(super) async fn retire_agent(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> ApiResult<Json<Value>> {
+    let caller = check_token(&s, &headers).await?;
+    let id = parse_id(&id, "id")?;
+    let agent = db::agent(&s.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("agent", id))?;
+    if let Caller::Submitter(token) = caller {
+        if db::agent_owner(&s.pool, id).await? != Some(token) {
+            return Err(ApiError::new(
+                StatusCode::FORBIDDEN,
+                "not_owner",
+                format!(
+                    "agent {id} was not submitted with this token; only its owner or the admin may retire it"
+                ),
+            ));
+        }
+    }
+    if !db::retire_agent(&s.pool, id).await? {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "retired",
+            format!("agent {id} ('{}') was retired already", agent.name),
+        ));
+    }
+    tracing::info!(id, name = %agent.name, "agent retired");
+    let agent = db::agent(&s.pool, id)
+        .await?
+        .ok_or_else(|| anyhow::anyhow!("agent {id} vanished after its retirement"))?;
+    Ok(Json(json!(agent)))
 }
 
 pub(super) async fn get_agent(

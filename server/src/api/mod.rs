@@ -179,7 +179,7 @@ pub fn router(state: AppState) -> Router {
     let api = Router::new()
         .route("/healthz", get(healthz))
         .route("/agents", get(list_agents).post(submit_agent))
-        .route("/agents/{id}", get(get_agent))
+        .route("/agents/{id}", get(get_agent).delete(retire_agent))
         .route("/agents/{id}/ratings", get(get_rating_history))
         .route("/agents/{id}/crossings", get(get_agent_crossings))
         .route("/matches", get(list_matches).post(queue_match))
@@ -509,13 +509,13 @@ fn may_cancel(caller: Caller, owner: Option<i64>, what: &str) -> ApiResult<()> {
     }
 }
 
-/// The agent `r` names, or 404 naming `field`.
+/// The agent `r` names, or 404 naming `field`; 409 if it was retired.
 async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiResult<db::Agent> {
     let found = match r {
         AgentRef::Id(id) => db::agent(&s.pool, *id).await?,
         AgentRef::Name(name) => db::agent_by_name(&s.pool, name).await?,
     };
-    found.ok_or_else(|| ApiError {
+    let agent = found.ok_or_else(|| ApiError {
         field: Some(field),
         ..match r {
             AgentRef::Id(id) => ApiError::not_found("agent", *id),
@@ -525,7 +525,21 @@ async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiRes
                 format!("no agent named '{name}'"),
             ),
         }
-    })
+    })?;
+    match &agent.retired_at {
+        Some(when) => Err(ApiError {
+            field: Some(field),
+            ..ApiError::new(
+                StatusCode::CONFLICT,
+                "retired",
+                format!(
+                    "agent {} ('{}') was retired at {when} and plays no new matches",
+                    agent.id, agent.name
+                ),
+            )
+        }),
+        None => Ok(agent),
+    }
 }
 
 /// A seed given, or one from the clock.

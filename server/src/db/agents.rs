@@ -41,10 +41,12 @@ pub struct Agent {
     pub success_rate: Option<f64>,
     /// Qualification effort.
     pub effort: Option<f64>,
+    /// When its owner or the admin retired it (UTC); none while it plays.
+    #[serde(default)]
+    pub retired_at: Option<String>,
 }
 
-pub(super) const AGENT_COLUMNS: &str =
-    "id, name, kind, spec_hash, builtin, created_at, qual_episodes, hit_rate, success_rate, effort";
+pub(super) const AGENT_COLUMNS: &str = "id, name, kind, spec_hash, builtin, created_at, qual_episodes, hit_rate, success_rate, effort, retired_at";
 
 /// All agents.
 pub async fn agents(pool: &Pool) -> sqlx::Result<Vec<Agent>> {
@@ -69,6 +71,26 @@ pub async fn agent_by_name(pool: &Pool, name: &str) -> sqlx::Result<Option<Agent
     .bind(name)
     .fetch_optional(pool)
     .await
+}
+
+/// The token an agent was submitted with (none: built in, or submitted with the admin token).
+pub async fn agent_owner(pool: &Pool, id: i64) -> sqlx::Result<Option<i64>> {
+    sqlx::query_scalar("SELECT submitted_by FROM agents WHERE id = $1")
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+        .map(Option::flatten)
+}
+
+/// Retires agent `id` now; false if it was retired already (or does not exist).
+pub async fn retire_agent(pool: &Pool, id: i64) -> sqlx::Result<bool> {
+    let done =
+        sqlx::query("UPDATE agents SET retired_at = $1 WHERE id = $2 AND retired_at IS NULL")
+            .bind(now_text())
+            .bind(id)
+            .execute(pool)
+            .await?;
+    Ok(done.rows_affected() == 1)
 }
 
 /// An agent's kind and spec (for playing it).

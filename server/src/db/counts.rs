@@ -31,10 +31,11 @@ pub async fn contest_tallies(pool: &Pool) -> sqlx::Result<Vec<(String, i64)>> {
     .await
 }
 
-/// (agents, finished matches): the leaderboard is recomputed when either changed.
+/// (agents plus retired agents, finished matches): each only grows, with every agent added or
+/// retired and every match finished, so the leaderboard is recomputed when either changed.
 pub async fn board_key(pool: &Pool) -> sqlx::Result<(i64, i64)> {
     sqlx::query_as(
-        "SELECT (SELECT COUNT(*) FROM agents), (SELECT COUNT(*) FROM matches WHERE status = 'done')",
+        "SELECT (SELECT COUNT(*) + COUNT(retired_at) FROM agents), (SELECT COUNT(*) FROM matches WHERE status = 'done')",
     )
     .fetch_one(pool)
     .await

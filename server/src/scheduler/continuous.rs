@@ -16,7 +16,8 @@ pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     if !queued.is_empty() {
         return Ok(false);
     }
-    let agents = db::agents(&state.pool).await?;
+    let mut agents = db::agents(&state.pool).await?;
+    agents.retain(|a| a.retired_at.is_none());
     let every = i64::from(state.settings.continuous_self_play_every);
     if every > 0 && !agents.is_empty() && cooperative_turn(state, every).await? {
         let self_played = db::self_play_counts(&state.pool).await?;
@@ -144,6 +145,7 @@ mod tests {
             hit_rate: success_rate,
             success_rate,
             effort: None,
+            retired_at: None,
         }
     }
 
