@@ -1114,6 +1114,84 @@ fn owners_retire_agents_which_keep_their_matches_and_play_no_new_ones() {
 }
 
 #[test]
+fn the_leaderboard_agrees_with_every_agent_page() {
+    // A seeded database: rated matches of different lengths and a cooperative one, all finished.
+    let dir = tempdir("agree");
+    let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    let plan = [
+        ("scripted", "scripted-drive", 4, 1),
+        ("scripted-drive", "scripted-soft", 6, 2),
+        ("scripted", "scripted", 4, 3),
+        ("scripted-soft", "scripted", 2, 4),
+    ];
+    for (x, y, rallies, seed) in plan {
+        let q = json!({"a": x, "b": y, "rallies": rallies, "seed": seed});
+        let (code, m) = call(a, "POST", "/api/v1/matches", Some(&q), Some(TOKEN));
+        assert_eq!(code, 202, "{m}");
+        wait_for(
+            a,
+            m["id"].as_i64().unwrap(),
+            "done",
+            Duration::from_secs(120),
+        );
+    }
+    let board: Leaderboard = get_as(a, "/api/v1/leaderboard");
+    let all: MatchList = get_as(a, "/api/v1/matches?status=done&limit=1000");
+    assert_eq!(board.matches, plan.len());
+    for row in &board.rows {
+        let page: AgentDetail = get_as(a, &format!("/api/v1/agents/{}", row.agent_id));
+        assert_eq!(page.row.name, row.agent);
+        let mine = all
+            .matches
+            .iter()
+            .filter(|m| m.agent_a == row.agent_id || m.agent_b == row.agent_id);
+        let rated = mine.clone().filter(|m| m.agent_a != m.agent_b).count();
+        let own = mine.filter(|m| m.agent_a == m.agent_b).count();
+        assert_eq!(
+            (row.matches, row.self_play_matches),
+            (rated, own),
+            "{}",
+            row.agent
+        );
+        // Rally lengths: the page's histogram and the leaderboard's mean and longest.
+        let rallies: i64 = page.rally_lengths.iter().map(|r| r.rallies).sum();
+        let total: i64 = page
+            .rally_lengths
+            .iter()
+            .map(|r| r.length * r.rallies)
+            .sum();
+        let mean = (rallies > 0).then(|| total as f64 / rallies as f64);
+        let close = |x: Option<f64>, y: Option<f64>| match (x, y) {
+            (Some(x), Some(y)) => (x - y).abs() < 1e-9,
+            (None, None) => true,
+            _ => false,
+        };
+        assert!(
+            close(row.mean_rally_length, mean),
+            "{}: {:?} vs {mean:?}",
+            row.agent,
+            row.mean_rally_length
+        );
+        assert_eq!(
+            row.max_rally_length,
+            page.rally_lengths.iter().map(|r| r.length).max(),
+            "{}",
+            row.agent
+        );
+        // The in-box fraction pooled over crossings, none without any.
+        let drift = &page.drift;
+        assert!(
+            close(row.in_box_fraction, drift.in_box_fraction),
+            "{}: {:?} vs {:?}",
+            row.agent,
+            row.in_box_fraction,
+            drift.in_box_fraction
+        );
+    }
+}
+
+#[test]
 fn slow_clients_are_cut_at_the_header_timeout_and_connections_are_capped() {
     // Four connections (the cap) that never finish their headers hold every slot: a fifth client
     // waits until the header-read timeout (1 s) closes them, then is served.

@@ -27,8 +27,8 @@ pub struct Entrant {
 }
 
 /// Per finished match: (agent A, agent B, points A, points B, mean rally length, max rally length,
-/// in-box fraction, energy distance).
-pub type Outcome = (i64, i64, i64, i64, f64, i64, Option<f64>, Option<f64>);
+/// in-box fraction, energy distance, rallies).
+pub type Outcome = (i64, i64, i64, i64, f64, i64, Option<f64>, Option<f64>, i64);
 
 /// Bootstrap resamples.
 pub const BOOTSTRAP: usize = 200;
@@ -88,16 +88,20 @@ pub struct Row {
     pub rating_low: Option<f64>,
     /// Upper end.
     pub rating_high: Option<f64>,
-    /// Finished matches.
+    /// Finished rated matches: against another agent (points won and the rating come from these).
     pub matches: usize,
+    /// Finished cooperative matches against itself: they rate nothing and count in the rally
+    /// lengths and drift only.
+    #[serde(default)]
+    pub self_play_matches: usize,
     /// Points won / points decided, in percent (null without points).
     pub points_won_pct: Option<f64>,
-    /// Mean rally length over its matches' rallies.
+    /// Mean rally length over its matches' rallies (each rally counts once).
     pub mean_rally_length: Option<f64>,
     /// Longest rally it played.
     pub max_rally_length: Option<i64>,
     /// Fraction of the crossings it is answerable for — the serves and its own returns — inside the
-    /// serve box (mean over its matches).
+    /// serve box (pooled over its matches' crossings, as its page shows it).
     pub in_box_fraction: Option<f64>,
     /// Energy distance between the serves' crossings and its own returns' (mean over its matches
     /// that have one): how far its returns drift from the serve distribution.
@@ -191,8 +195,10 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
                     decided += w + l;
                 }
             }
-            let mean =
-                |xs: Vec<f64>| (!xs.is_empty()).then(|| xs.iter().sum::<f64>() / xs.len() as f64);
+            // Over its rallies, as its page's histogram counts them (not a mean of match means).
+            let rallies: i64 = mine.iter().map(|o| o.8).sum();
+            let mean_rally_length = (rallies > 0)
+                .then(|| mine.iter().map(|o| o.4 * o.8 as f64).sum::<f64>() / rallies as f64);
             // Matches against itself rate nothing: without another opponent there is no interval.
             let rated = mine.iter().any(|o| o.0 != o.1);
             let interval = if !rated || boot[i].is_empty() {
@@ -210,9 +216,10 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
                 rating: rating[i],
                 rating_low: interval.0,
                 rating_high: interval.1,
-                matches: mine.len(),
+                matches: mine.iter().filter(|o| o.0 != o.1).count(),
+                self_play_matches: mine.iter().filter(|o| o.0 == o.1).count(),
                 points_won_pct: (decided > 0).then(|| 100.0 * won as f64 / decided as f64),
-                mean_rally_length: mean(mine.iter().map(|o| o.4).collect()),
+                mean_rally_length,
                 max_rally_length: mine.iter().map(|o| o.5).max(),
                 in_box_fraction: extras.drift.get(&a.id).and_then(|d| d.0),
                 drift: extras.drift.get(&a.id).and_then(|d| d.1),
@@ -400,15 +407,26 @@ mod tests {
         };
         let agents = [entrant(1), entrant(2), entrant(3)];
         let outcomes: Vec<Outcome> = vec![
-            (1, 2, 12, 8, 1.0, 3, None, None),
-            (3, 3, 10, 10, 4.5, 21, None, None),
+            (1, 2, 12, 8, 1.0, 3, None, None, 20),
+            (3, 3, 10, 10, 4.5, 21, None, None, 20),
+            (3, 3, 1, 1, 1.5, 2, None, None, 2),
         ];
         let board = leaderboard(&agents, &outcomes, &Extras::default());
         let row = |id| board.rows.iter().find(|r| r.agent_id == id).unwrap();
         let (one, three) = (row(1), row(3));
         assert!(one.rating_low.is_some() && one.points_won_pct == Some(60.0));
-        assert_eq!((three.matches, three.max_rally_length), (1, Some(21)));
-        assert_eq!(three.mean_rally_length, Some(4.5));
+        assert_eq!(
+            (
+                three.matches,
+                three.self_play_matches,
+                three.max_rally_length
+            ),
+            (0, 2, Some(21)),
+            "its matches are against itself: not rated"
+        );
+        assert_eq!((one.matches, one.self_play_matches), (1, 0));
+        // Over its 22 rallies: (4.5·20 + 1.5·2) / 22.
+        assert_eq!(three.mean_rally_length, Some(93.0 / 22.0));
         assert_eq!((three.rating, three.points_won_pct), (1500.0, None));
         assert!(
             three.rating_low.is_none(),

@@ -19,7 +19,7 @@ impl From<&Agent> for crate::ratings::Entrant {
 /// Every finished match's outcome.
 pub async fn outcomes(pool: &Pool) -> sqlx::Result<Vec<Outcome>> {
     sqlx::query_as(
-        "SELECT agent_a, agent_b, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance FROM matches WHERE status = 'done' ORDER BY id",
+        "SELECT agent_a, agent_b, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, rallies FROM matches WHERE status = 'done' ORDER BY id",
     )
     .fetch_all(pool)
     .await
@@ -37,7 +37,12 @@ pub async fn latest_glicko(pool: &Pool) -> sqlx::Result<Vec<(i64, f64, f64)>> {
 /// Per agent: mean over its finished matches of its own side's in-box fraction and serve → return
 /// energy distance (`match_drift`).
 pub async fn agent_drift(pool: &Pool) -> sqlx::Result<Vec<(i64, Option<f64>, Option<f64>)>> {
-    sqlx::query_as("SELECT agent_id, AVG(in_box_fraction), AVG(energy_distance) FROM match_drift GROUP BY agent_id")
+    // As `agent_drift_summary` computes them for the agent's page: the in-box fraction pooled over
+    // crossings (a match without any weighs nothing), the energy distance averaged where it exists.
+    sqlx::query_as(
+        "SELECT agent_id, SUM(in_box_fraction * crossings) / NULLIF(CAST(SUM(crossings) AS DOUBLE PRECISION), 0), \
+         AVG(energy_distance) FROM match_drift GROUP BY agent_id",
+    )
         .fetch_all(pool)
         .await
 }
