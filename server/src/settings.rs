@@ -10,7 +10,8 @@ use crate::db;
 /// The default settings file, `config/default.toml`.
 pub const DEFAULT_SETTINGS_TOML: &str = include_str!("../../config/default.toml");
 
-/// Server settings (`config/default.toml`).
+/// Server settings. Every one has its default in `config/default.toml` (compiled in), the one place
+/// they are defined: a settings file names only what it changes.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Settings {
@@ -29,22 +30,18 @@ pub struct Settings {
     /// Every this many matches, continuous mode queues a cooperative one: an agent against itself
     /// (it rates nothing; it fills the rally-length and drift statistics, which a strong agent's
     /// matches against weak ones leave short). 0: never.
-    #[serde(default = "default_self_play_every")]
     pub continuous_self_play_every: u32,
     /// Most rallies a requested match may have.
     pub max_rallies: u32,
     /// Qualification episodes run for a submitted agent.
     pub qualification_episodes: usize,
     /// Least share of the qualification's P2 serves an agent must hit to be admitted.
-    #[serde(default = "default_min_hit_rate")]
     pub qualification_min_hit_rate: f64,
     /// Largest share of the qualification's episodes in which an agent may drop its paddle.
-    #[serde(default = "default_max_dropped")]
     pub qualification_max_dropped: f64,
     /// The longest a submitted checkpoint's validation (parsing, checking, building its network —
     /// an ONNX graph is optimised by tract) may take, waiting for its turn included, s: past it the
     /// submission is refused (422 naming this setting).
-    #[serde(default = "default_validation_budget_s")]
     pub validation_budget_s: f64,
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
@@ -53,73 +50,32 @@ pub struct Settings {
     pub admin_token: String,
     /// Matches a submitter token may queue per minute (plain matches, tournaments' and SPRTs'
     /// first ones); the admin token is not limited.
-    #[serde(default = "default_matches_per_minute")]
     pub max_matches_per_minute: u32,
     /// Most matches one tournament may queue.
-    #[serde(default = "default_tournament_matches")]
     pub max_tournament_matches: u32,
     /// Agents a submitter token may submit per hour (each one is qualified on
     /// `qualification_episodes` episodes); the admin token is not limited.
-    #[serde(default = "default_agents_per_hour")]
     pub max_agents_per_hour: u32,
     /// The checkpoints registered as built-in agents on start, qualified like submissions:
     /// [`EMBEDDED_BUILTINS`] (the default) for those compiled into the binary, whatever directory
     /// it starts in; else a directory of `NAME.json` files; empty: none. One that does not load is
     /// skipped with a warning.
-    #[serde(default = "default_builtin_checkpoints")]
     pub builtin_checkpoints: PathBuf,
     /// How long a running match's lease lasts without a heartbeat, s: a worker that died or lost
     /// the database loses its matches after this long (they are queued again). Heartbeats come
     /// every quarter of it.
-    #[serde(default = "default_lease_s")]
     pub lease_s: f64,
     /// HTTP connections open at once; more wait in the kernel's backlog.
-    #[serde(default = "default_max_connections")]
     pub max_connections: usize,
     /// How long a client may take to send a request's headers, s (also the longest a keep-alive
     /// connection waits idle for its next request): past it, the connection is closed.
-    #[serde(default = "default_header_read_timeout_s")]
     pub header_read_timeout_s: f64,
     /// How long a shutdown (SIGTERM, Ctrl-C) waits for open HTTP connections (live streams, slow
     /// clients) before closing them, s. Running matches are finished and stored either way.
-    #[serde(default = "default_shutdown_deadline_s")]
     pub shutdown_deadline_s: f64,
     /// This process's worker name in the `workers` table and the matches it plays; empty:
     /// `HOST:PID`.
-    #[serde(default)]
     pub worker_name: String,
-}
-
-fn default_validation_budget_s() -> f64 {
-    10.0
-}
-
-fn default_min_hit_rate() -> f64 {
-    0.3
-}
-
-fn default_max_dropped() -> f64 {
-    0.1
-}
-
-fn default_self_play_every() -> u32 {
-    3
-}
-
-fn default_lease_s() -> f64 {
-    20.0
-}
-
-fn default_max_connections() -> usize {
-    1024
-}
-
-fn default_header_read_timeout_s() -> f64 {
-    10.0
-}
-
-fn default_shutdown_deadline_s() -> f64 {
-    10.0
 }
 
 impl Settings {
@@ -152,26 +108,18 @@ pub fn hostname() -> String {
 /// ([`agents::builtins`]).
 pub const EMBEDDED_BUILTINS: &str = "embedded";
 
-fn default_builtin_checkpoints() -> PathBuf {
-    PathBuf::from(EMBEDDED_BUILTINS)
-}
-
-fn default_agents_per_hour() -> u32 {
-    30
-}
-
-fn default_matches_per_minute() -> u32 {
-    600
-}
-
-fn default_tournament_matches() -> u32 {
-    2000
-}
-
 impl Settings {
-    /// Parses settings, naming the field that is wrong.
+    /// Parses settings: `text`'s over the defaults of `config/default.toml`, naming the field that
+    /// is wrong (an unknown one included).
     pub fn from_toml(text: &str) -> Result<Settings, String> {
-        let s: Settings = toml::from_str(text).map_err(|e| e.to_string())?;
+        let mut merged: toml::Table = DEFAULT_SETTINGS_TOML
+            .parse()
+            .map_err(|e| format!("the built-in config/default.toml: {e}"))?;
+        let given: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
+        merged.extend(given);
+        let s: Settings = toml::Value::Table(merged)
+            .try_into()
+            .map_err(|e: toml::de::Error| e.to_string())?;
         if s.workers > 64 {
             return Err("workers must be between 0 (serve the API alone) and 64".into());
         }
@@ -219,5 +167,33 @@ impl Settings {
             }
         }
         Ok(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_settings_file_names_only_what_it_changes() {
+        let defaults = Settings::from_toml("").unwrap();
+        assert_eq!(defaults.qualification_episodes, 100);
+        assert_eq!(
+            defaults.builtin_checkpoints,
+            PathBuf::from(EMBEDDED_BUILTINS)
+        );
+        let s = Settings::from_toml("workers = 3\nlease_s = 8.0\n").unwrap();
+        assert_eq!((s.workers, s.lease_s), (3, 8.0));
+        assert_eq!(s.max_connections, defaults.max_connections);
+        assert_eq!(
+            s.qualification_min_hit_rate,
+            defaults.qualification_min_hit_rate
+        );
+        let e = Settings::from_toml("wrokers = 3\n").unwrap_err();
+        assert!(e.contains("wrokers"), "{e}");
+        let e = Settings::from_toml("workers = \"many\"\n").unwrap_err();
+        assert!(e.contains("workers"), "{e}");
+        let e = Settings::from_toml("qualification_min_hit_rate = 2.0\n").unwrap_err();
+        assert!(e.contains("qualification_min_hit_rate"), "{e}");
     }
 }

@@ -12,7 +12,8 @@ use super::CliError;
 #[derive(Args, Debug)]
 #[command(
     after_help = "Settings come from the config file (default: config/default.toml, or the built-in copy of it\n\
-                  when that file is missing); --addr, --db, --workers and --no-continuous override it, and\n\
+                  when that file is missing); a file names only the settings it changes, the rest keep\n\
+                  config/default.toml's values. --addr, --db, --workers and --no-continuous override it, and\n\
                   RALLY_ADMIN_TOKEN overrides its admin_token. Logs go to stderr (RUST_LOG=debug for more).\n\n\
                   On first start the built-in scripted agents are registered and, unless continuous mode is off,\n\
                   matches between them start at once: open the printed address to watch the leaderboard fill.\n\n\
