@@ -21,7 +21,8 @@ pub struct Settings {
     pub db: db::Location,
     /// Match workers (each a blocking thread).
     pub workers: usize,
-    /// Keep scheduling matches between the agents with the fewest matches when the queue is empty.
+    /// When the queue is empty, keep queuing matches: the agent whose rating is least certain against
+    /// the opponent it has met least, and every `continuous_self_play_every`-th a cooperative one.
     pub continuous: bool,
     /// Rallies per match scheduled by the continuous mode.
     pub continuous_rallies: u32,

@@ -35,7 +35,8 @@ pub struct ServeArgs {
     /// Match workers in this process (0: serve the API alone; `rally worker` processes play).
     #[arg(long, value_parser = clap::value_parser!(u16).range(0..=64))]
     workers: Option<u16>,
-    /// Play only requested matches (no continuous matches between the least-rated agents).
+    /// Play only requested matches (no continuous matches for the agents whose ratings are least
+    /// certain).
     #[arg(long)]
     no_continuous: bool,
 }
