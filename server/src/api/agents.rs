@@ -35,17 +35,13 @@ pub(super) async fn retire_agent(
     let agent = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
-    if let Caller::Submitter(token) = caller {
-        if db::agent_owner(&s.pool, id).await? != Some(token) {
-            return Err(ApiError::new(
-                StatusCode::FORBIDDEN,
-                "not_owner",
-                format!(
-                    "agent {id} was not submitted with this token; only its owner or the admin may retire it"
-                ),
-            ));
-        }
-    }
+    let owner = db::agent_owner(&s.pool, id).await?;
+    owner_or_admin(
+        caller,
+        owner,
+        &format!("agent {id} was not submitted"),
+        "retire",
+    )?;
     if !db::retire_agent(&s.pool, id).await? {
         return Err(ApiError::new(
             StatusCode::CONFLICT,

@@ -496,15 +496,19 @@ fn submitter(caller: Caller) -> Option<i64> {
 
 /// The admin may cancel anything; a submitter only what its own token queued.
 fn may_cancel(caller: Caller, owner: Option<i64>, what: &str) -> ApiResult<()> {
+    owner_or_admin(caller, owner, &format!("{what} was not queued"), "cancel")
+}
+
+/// The admin may `act` on anything, a submitter token only on what it made (`owner`); 403
+/// `not_owner` otherwise, saying `what` (e.g. "match 3 was not queued").
+fn owner_or_admin(caller: Caller, owner: Option<i64>, what: &str, act: &str) -> ApiResult<()> {
     match caller {
         Caller::Admin => Ok(()),
         Caller::Submitter(t) if owner == Some(t) => Ok(()),
         Caller::Submitter(_) => Err(ApiError::new(
             StatusCode::FORBIDDEN,
             "not_owner",
-            format!(
-                "{what} was not queued with this token; only its owner or the admin may cancel it"
-            ),
+            format!("{what} with this token; only its owner or the admin may {act} it"),
         )),
     }
 }
