@@ -474,6 +474,14 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
         ("method not allowed on a page", "POST", "/", vec![], vec![], 405),
         ("no such page", "GET", "/nope", vec![], vec![], 404),
         (
+            "an agent name no agent can have (a NUL byte: PostgreSQL refuses it)",
+            "POST",
+            "/api/v1/sprt",
+            authed.to_vec(),
+            b"{\"a\": \"k\\u0000\", \"b\": \"scripted\", \"elo0\": 0, \"elo1\": 50}".to_vec(),
+            404,
+        ),
+        (
             "an id that is not UTF-8",
             "GET",
             "/api/v1/agents/%FF",

@@ -517,6 +517,9 @@ fn owner_or_admin(caller: Caller, owner: Option<i64>, what: &str, act: &str) -> 
 async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiResult<db::Agent> {
     let found = match r {
         AgentRef::Id(id) => db::agent(&s.pool, *id).await?,
+        // A string that cannot be an agent's name names none (and never reaches the store:
+        // PostgreSQL refuses text with NUL bytes).
+        AgentRef::Name(name) if check_name(name).is_err() => None,
         AgentRef::Name(name) => db::agent_by_name(&s.pool, name).await?,
     };
     let agent = found.ok_or_else(|| ApiError {
