@@ -7,7 +7,6 @@ use std::sync::Arc;
 use agents::checkpoint::{Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
 use agents::controller::{ControllerSpec, PdGains};
 use agents::observation::ObsBlock;
-use base64::Engine;
 
 fn model() -> Arc<sim::model::Model> {
     Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
@@ -27,9 +26,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
             std: vec![1.0; n],
         },
         policy: None,
-        onnx: Some(OnnxPolicy {
-            model_base64: base64::engine::general_purpose::STANDARD.encode(bytes),
-        }),
+        onnx: Some(OnnxPolicy::from_bytes(bytes)),
         policy_std: None,
         grip_floor: None,
         training: None,
@@ -45,6 +42,13 @@ fn an_onnx_policy_matches_numpy_and_plays() {
     let text = serde_json::to_string(&ck).unwrap();
     let ck = Checkpoint::from_json(&text, &m).unwrap();
     let net = ck.network().unwrap();
+    // The plan the validation built is the one every player gets (and a clone's players too).
+    let plan = |n: &agents::checkpoint::Network| match n {
+        agents::checkpoint::Network::Onnx(plan, _) => plan.clone(),
+        other => panic!("not ONNX: {other:?}"),
+    };
+    let again = ck.clone().network().unwrap();
+    assert!(Arc::ptr_eq(&plan(&net), &plan(&again)));
     let expected: serde_json::Value =
         serde_json::from_str(include_str!("fixtures/policy_expected.json")).unwrap();
     let rows = |k: &str| -> Vec<Vec<f64>> {
@@ -106,7 +110,7 @@ fn mismatched_or_broken_onnx_models_are_refused() {
         .unwrap_err();
     assert!(e.field.starts_with("onnx"), "{e}");
     let mut c = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, bytes);
-    c.onnx.as_mut().unwrap().model_base64 = "@@@".into();
+    c.onnx = Some(OnnxPolicy::from_base64("@@@".into()));
     assert!(c.validate(&m).unwrap_err().message.contains("base64"));
     // A Direct controller wants 77 actions, the network gives 13.
     let mut c = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, bytes);

@@ -6,7 +6,6 @@
 use agents::checkpoint::{Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
 use agents::controller::{ControllerSpec, PdGains};
 use agents::observation::{ObsBlock, Observer};
-use base64::Engine;
 use libfuzzer_sys::fuzz_target;
 use muscle_rally_fuzz::model;
 
@@ -32,9 +31,7 @@ fuzz_target!(|data: &[u8]| {
             std: vec![1.0; n],
         },
         policy: None,
-        onnx: Some(OnnxPolicy {
-            model_base64: base64::engine::general_purpose::STANDARD.encode(data),
-        }),
+        onnx: Some(OnnxPolicy::from_bytes(data)),
         policy_std: None,
         grip_floor: None,
         training: None,

@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use crate::{api, db, AppState, Settings, EMBEDDED_BUILTINS};
+use crate::settings::{Settings, EMBEDDED_BUILTINS};
+use crate::state::AppState;
+use crate::{api, db};
 
 /// Why [`validate_checkpoint`] refused.
 #[derive(Debug)]

@@ -3,7 +3,8 @@
 
 use std::sync::Arc;
 
-use crate::{db, ratings, AppState};
+use crate::state::AppState;
+use crate::{db, ratings};
 
 /// The leaderboard (retired agents left out), recomputed when an agent was added or retired or a
 /// match finished.

@@ -21,7 +21,7 @@ use tokio::net::TcpListener;
 
 use crate::api::ApiError;
 
-/// The edge's bounds (from [`crate::Settings`]).
+/// The edge's bounds (from [`crate::settings::Settings`]).
 #[derive(Debug, Clone, Copy)]
 pub struct Limits {
     /// Connections open at once; the next one waits in the kernel's backlog until one closes.

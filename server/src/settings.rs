@@ -74,6 +74,9 @@ pub struct Settings {
     /// How long a shutdown (SIGTERM, Ctrl-C) waits for open HTTP connections (live streams, slow
     /// clients) before closing them, s. Running matches are finished and stored either way.
     pub shutdown_deadline_s: f64,
+    /// Agents whose built players (a checkpoint parsed, validated, its network built) a process
+    /// keeps for its next matches, the least recently used leaving first; 0: none kept.
+    pub player_cache: usize,
     /// This process's worker name in the `workers` table and the matches it plays; empty:
     /// `HOST:PID`.
     pub worker_name: String,
@@ -92,6 +95,19 @@ impl Settings {
         } else {
             self.worker_name.clone()
         }
+    }
+}
+
+/// Where rally keeps what it makes and imports — the default store (`rally.db`), the imported
+/// MyoChallenge model (`models/`) and the Python environment that imported it — whatever directory a
+/// command starts in: `$RALLY_DATA_DIR`, else the user's data directory (on Linux
+/// `$XDG_DATA_HOME/muscle-rally`, by default `~/.local/share/muscle-rally`).
+pub fn data_dir() -> PathBuf {
+    match std::env::var_os("RALLY_DATA_DIR").filter(|d| !d.is_empty()) {
+        Some(dir) => PathBuf::from(dir),
+        None => dirs::data_dir()
+            .map(|d| d.join("muscle-rally"))
+            .unwrap_or_else(|| PathBuf::from("data")),
     }
 }
 
@@ -118,6 +134,10 @@ impl Settings {
             .map_err(|e| format!("the built-in config/default.toml: {e}"))?;
         let given: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
         merged.extend(given);
+        if !merged.contains_key("db") {
+            let store = data_dir().join("rally.db").display().to_string();
+            merged.insert("db".into(), toml::Value::String(store));
+        }
         let s: Settings = toml::Value::Table(merged)
             .try_into()
             .map_err(|e: toml::de::Error| e.to_string())?;

@@ -11,10 +11,11 @@ use super::CliError;
 /// Arguments of `rally serve`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Settings come from the config file (default: config/default.toml, or the built-in copy of it\n\
-                  when that file is missing); a file names only the settings it changes, the rest keep\n\
-                  config/default.toml's values. --addr, --db, --workers and --no-continuous override it, and\n\
-                  RALLY_ADMIN_TOKEN overrides its admin_token. Logs go to stderr (RUST_LOG=debug for more).\n\n\
+    after_help = "Settings are config/default.toml's (built into the binary: the same from any directory) with\n\
+                  what a --config file changes laid over them (it names only those). --addr, --db, --workers and\n\
+                  --no-continuous override them, and RALLY_ADMIN_TOKEN the admin_token. The store is DATA/rally.db\n\
+                  unless --db or the file names another (DATA: $RALLY_DATA_DIR, else ~/.local/share/muscle-rally).\n\
+                  Logs go to stderr (RUST_LOG=debug for more).\n\n\
                   On first start the built-in scripted agents are registered and, unless continuous mode is off,\n\
                   matches between them start at once: open the printed address to watch the leaderboard fill.\n\n\
                   Example:\n  RALLY_ADMIN_TOKEN=secret rally serve --addr 127.0.0.1:8080 --db data/rally.db\n  \
@@ -41,19 +42,17 @@ pub struct ServeArgs {
     no_continuous: bool,
 }
 
-/// The settings file `config` names (default: config/default.toml, or the built-in copy of it
-/// when that file is missing), errors naming the file and the field.
+/// The settings: config/default.toml's values (compiled into the binary, so the same from any
+/// directory) with what the file `config` names laid over them; errors name the file and the field.
 pub fn load_settings(config: Option<&Path>) -> Result<server::Settings, CliError> {
-    let default_path = PathBuf::from("config/default.toml");
-    let text = match config {
-        Some(p) => std::fs::read_to_string(p)
-            .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", p.display())))?,
-        None if default_path.exists() => {
-            std::fs::read_to_string(&default_path).context("reading config/default.toml")?
-        }
-        None => server::DEFAULT_SETTINGS_TOML.to_string(),
+    let (text, name) = match config {
+        Some(p) => (
+            std::fs::read_to_string(p)
+                .map_err(|e| CliError::Usage(format!("cannot read {}: {e}", p.display())))?,
+            p.display().to_string(),
+        ),
+        None => (String::new(), "config/default.toml".to_string()),
     };
-    let name = config.unwrap_or(&default_path).display().to_string();
     server::Settings::from_toml(&text).map_err(|e| CliError::Usage(format!("{name}: {e}")))
 }
 

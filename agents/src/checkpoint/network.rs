@@ -95,13 +95,60 @@ impl Mlp {
     }
 }
 
-/// An ONNX network embedded in a checkpoint.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// An ONNX network embedded in a checkpoint: the `.onnx` file, base64-encoded (input 0: float32
+/// `[batch, observation]`; output 0: float32 `[batch, action]`). Its runnable plan is built once,
+/// by the first validation or player, and shared by every player of this checkpoint and its clones
+/// (tract's optimisation of a graph costs far more than a match's first steps). The file cannot be
+/// changed after that, so the plan always is the file's.
+#[derive(Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OnnxPolicy {
-    /// The `.onnx` file, base64-encoded. Input 0: float32 `[batch, observation]`; output 0: float32
-    /// `[batch, action]`.
-    pub model_base64: String,
+    model_base64: String,
+    /// The plan, with the observation width it was built for.
+    #[serde(skip)]
+    plan: std::sync::OnceLock<(usize, OnnxPlan)>,
+}
+
+impl OnnxPolicy {
+    /// An ONNX file's bytes.
+    pub fn from_bytes(onnx: &[u8]) -> OnnxPolicy {
+        use base64::Engine;
+        OnnxPolicy::from_base64(base64::engine::general_purpose::STANDARD.encode(onnx))
+    }
+
+    /// An ONNX file, base64-encoded (checked when the checkpoint is validated).
+    pub fn from_base64(model_base64: String) -> OnnxPolicy {
+        OnnxPolicy {
+            model_base64,
+            plan: std::sync::OnceLock::new(),
+        }
+    }
+
+    /// The file, base64-encoded, as the checkpoint stores it.
+    pub fn model_base64(&self) -> &str {
+        &self.model_base64
+    }
+}
+
+impl PartialEq for OnnxPolicy {
+    fn eq(&self, other: &OnnxPolicy) -> bool {
+        self.model_base64 == other.model_base64
+    }
+}
+
+impl std::fmt::Debug for OnnxPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "OnnxPolicy({} base64 bytes{})",
+            self.model_base64.len(),
+            if self.plan.get().is_some() {
+                ", built"
+            } else {
+                ""
+            }
+        )
+    }
 }
 
 pub(crate) type OnnxPlan = std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>;
@@ -146,8 +193,21 @@ impl Network {
     }
 }
 
-/// Decodes and prepares an embedded ONNX model for observations of `inputs` entries.
+/// The runnable plan of an embedded ONNX model for observations of `inputs` entries: built (decoded,
+/// checked, optimised) on the first call, then the same one.
 pub(crate) fn load_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError> {
+    if let Some((n, plan)) = p.plan.get() {
+        if *n == inputs {
+            return Ok(plan.clone());
+        }
+    }
+    let plan = build_onnx(p, inputs)?;
+    // Two threads may build it at once; either plan is the file's, and the first one set is kept.
+    let _ = p.plan.set((inputs, plan.clone()));
+    Ok(plan)
+}
+
+fn build_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError> {
     use base64::Engine;
     use tract_onnx::prelude::*;
     let bytes = base64::engine::general_purpose::STANDARD

@@ -164,9 +164,9 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         return Err(ApiError::name_taken("an agent", &a.name));
     }
     let text = body.checkpoint.to_string();
-    let checkpoint = match crate::validate_checkpoint(&s, text.clone()).await? {
+    let checkpoint = match crate::admission::validate_checkpoint(&s, text.clone()).await? {
         Ok(c) => c,
-        Err(crate::Refused::Invalid(e)) => {
+        Err(crate::admission::Refused::Invalid(e)) => {
             return Err(ApiError {
                 field: Some("checkpoint"),
                 ..ApiError::new(
@@ -176,7 +176,7 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
                 )
             })
         }
-        Err(crate::Refused::OverBudget(budget)) => {
+        Err(crate::admission::Refused::OverBudget(budget)) => {
             return Err(ApiError {
                 field: Some("checkpoint"),
                 ..ApiError::new(
@@ -192,13 +192,15 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     };
     charge(&s, caller, Budget::Agents, 1)?;
     let spec = ::agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
-    let mut report = crate::qualify(&s, spec).await?.map_err(|e| ApiError {
-        field: Some("checkpoint"),
-        ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
-    })?;
+    let mut report = crate::admission::qualify(&s, spec)
+        .await?
+        .map_err(|e| ApiError {
+            field: Some("checkpoint"),
+            ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
+        })?;
     // The report names the agent as submitted (not the checkpoint's inner name).
     report.agent = body.name.clone();
-    crate::admits(&s.settings, &report).map_err(|e| ApiError {
+    crate::admission::admits(&s.settings, &report).map_err(|e| ApiError {
         field: Some("checkpoint"),
         ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "below_qualification", e)
     })?;

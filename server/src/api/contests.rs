@@ -13,9 +13,10 @@ use super::{
     agent_or_404, charge, check_token, limit_param, may_cancel, only_params, parse_id,
     seed_or_clock, submitter, ApiError, ApiResult,
 };
+use crate::state::{AppState, Budget};
 use crate::tournament::{self, Kind};
 use crate::wire::{self, ContestMatch, NamedAgent};
-use crate::{db, ratings, AppState, Budget};
+use crate::{db, ratings};
 
 /// `?limit=` (1–1000, default 100); any other parameter is refused.
 fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {

@@ -13,8 +13,9 @@ use axum::routing::get;
 use axum::{Json, Router};
 use serde_json::{json, Value};
 
+use crate::db;
+use crate::state::{AppState, Budget};
 use crate::wire::{self, AgentRef};
-use crate::{db, AppState, Budget};
 
 mod agents;
 mod contests;
@@ -602,6 +603,14 @@ async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {
     out.push_str(&format!(
         "# HELP rally_workers Match workers.\n# TYPE rally_workers gauge\nrally_workers {}\n",
         s.settings.workers
+    ));
+    let (setups, setup_s) = s.players.setups();
+    out.push_str(&format!(
+        "# HELP rally_match_setup_seconds From a match's claim to its first frame, in this process.\n# TYPE rally_match_setup_seconds summary\nrally_match_setup_seconds_sum {setup_s}\nrally_match_setup_seconds_count {setups}\n"
+    ));
+    out.push_str(&format!(
+        "# HELP rally_player_loads_total Checkpoints parsed and built for matches and replays in this process.\n# TYPE rally_player_loads_total counter\nrally_player_loads_total {}\n",
+        s.players.loads()
     ));
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response())
 }

@@ -126,6 +126,43 @@ pub async fn insert_checkpoint_agent(
     .await
 }
 
+/// Rewrites the spec hashes of a store written before they were SHA-256 (32 hex digits then):
+/// each such agent's, and each match side queued with that very hash, so that the matches still
+/// replay (a side whose hash already differed keeps it, and stays refused as changed). One
+/// transaction, run at every open; on a current store it only scans the agents' hashes. Returns how
+/// many agents it rehashed.
+pub async fn rehash_specs(pool: &Pool) -> sqlx::Result<usize> {
+    let stale: Vec<(i64, String, String)> =
+        sqlx::query_as("SELECT id, spec, spec_hash FROM agents WHERE length(spec_hash) <> 64")
+            .fetch_all(pool)
+            .await?;
+    if stale.is_empty() {
+        return Ok(0);
+    }
+    let mut tx = pool.begin().await?;
+    for (id, spec, was) in &stale {
+        let now = spec_hash(spec);
+        for side in ["a", "b"] {
+            sqlx::query(&format!(
+                "UPDATE matches SET spec_hash_{side} = $1 WHERE agent_{side} = $2 AND spec_hash_{side} = $3"
+            ))
+            .bind(&now)
+            .bind(id)
+            .bind(was)
+            .execute(&mut *tx)
+            .await?;
+        }
+        sqlx::query("UPDATE agents SET spec_hash = $1 WHERE id = $2")
+            .bind(&now)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+    }
+    tx.commit().await?;
+    tracing::info!(agents = stale.len(), "spec hashes rewritten as SHA-256");
+    Ok(stale.len())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -156,5 +193,60 @@ mod tests {
         let found = agent_by_name(&pool, "Mine").await.unwrap().unwrap();
         assert_eq!((found.id, found.name.as_str()), (id, "mine"));
         assert!(agent_by_name(&pool, "SCRIPTED").await.unwrap().is_some());
+    }
+
+    #[tokio::test]
+    async fn a_store_of_the_old_spec_hashes_is_rehashed_and_its_matches_still_match() {
+        let pool = test_store("rehash").await;
+        register_builtins(&pool).await.unwrap();
+        let spec = r#"{"a": "checkpoint"}"#;
+        let qual = (6, 0.5, 0.1, 0.1);
+        let id = insert_checkpoint_agent(&pool, "old", spec, qual, false, None)
+            .await
+            .unwrap();
+        // As a store written with the 32-digit FNV digests has them: the agent, a match queued
+        // with its hash, and one whose side had another (a spec changed since).
+        let fnv = "00112233445566778899aabbccddeeff";
+        sqlx::query("UPDATE agents SET spec_hash = $1 WHERE id = $2")
+            .bind(fnv)
+            .bind(id)
+            .execute(&pool)
+            .await
+            .unwrap();
+        let a = agent(&pool, id).await.unwrap().unwrap();
+        let queue = |pool: Pool, a: Agent| async move {
+            queue_match(&pool, &a, &a, 1, 7, false, Origin::default())
+                .await
+                .unwrap()
+        };
+        let kept = queue(pool.clone(), a.clone()).await;
+        let changed = queue(
+            pool.clone(),
+            Agent {
+                spec_hash: "ffff".repeat(8),
+                ..a
+            },
+        )
+        .await;
+        assert_eq!(rehash_specs(&pool).await.unwrap(), 1);
+        assert_eq!(rehash_specs(&pool).await.unwrap(), 0, "idempotent");
+        let now = agent(&pool, id).await.unwrap().unwrap().spec_hash;
+        assert_eq!(now, spec_hash(spec));
+        assert_eq!(now.len(), 64);
+        let m = match_row(&pool, kept).await.unwrap().unwrap();
+        assert_eq!(
+            (m.spec_hash_a.as_str(), m.spec_hash_b.as_str()),
+            (now.as_str(), now.as_str())
+        );
+        let m = match_row(&pool, changed).await.unwrap().unwrap();
+        assert_eq!(
+            m.spec_hash_a,
+            "ffff".repeat(8),
+            "a changed side stays changed"
+        );
+        // The scripted agents' hashes were current already.
+        for a in agents(&pool).await.unwrap() {
+            assert_eq!(a.spec_hash.len(), 64, "{}", a.name);
+        }
     }
 }

@@ -169,6 +169,7 @@ pub async fn open(location: &Location) -> anyhow::Result<Pool> {
                 .connect(&url)
                 .await?;
             sqlx::migrate!("../migrations").run(&pool).await?;
+            agents::rehash_specs(&pool).await?;
             Ok(pool)
         }
         Location::Postgres(url) => {
@@ -179,6 +180,7 @@ pub async fn open(location: &Location) -> anyhow::Result<Pool> {
                 .await
                 .map_err(|e| anyhow::anyhow!("{location}: {e}"))?;
             sqlx::migrate!("../migrations/postgres").run(&pool).await?;
+            agents::rehash_specs(&pool).await?;
             Ok(pool)
         }
     }
@@ -281,18 +283,21 @@ impl<'r> Decode<'r, Any> for Flag {
     }
 }
 
-/// A hex SHA-256-like digest of a spec (FNV-1a 64 over the bytes, printed twice salted; enough to tell
-/// checkpoints apart and to recognise the same one again).
+/// The SHA-256 of `text`, as 64 lowercase hex digits.
+pub fn sha256_hex(text: &str) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(text.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// An agent's spec's identity: its SHA-256. Each side of a match records it when the match is
+/// queued (a side whose agent's spec no longer has it is refused, not replayed with other weights),
+/// and the workers' cache of built players is keyed by it: a collision would put one agent's
+/// network in another's place, so it is a cryptographic hash.
 pub fn spec_hash(spec: &str) -> String {
-    let fnv = |salt: u64| {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325 ^ salt;
-        for b in spec.as_bytes() {
-            h ^= *b as u64;
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-        h
-    };
-    format!("{:016x}{:016x}", fnv(0), fnv(0x9e37_79b9_7f4a_7c15))
+    sha256_hex(spec)
 }
 
 /// A fresh store for a unit test named `tag`: an SQLite file in the temporary directory, or a new

@@ -4,11 +4,7 @@ use super::*;
 
 /// The SHA-256 of a token, hex.
 pub fn token_sha256(token: &str) -> String {
-    use sha2::Digest;
-    sha2::Sha256::digest(token.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    sha256_hex(token)
 }
 
 /// Stores a new submitter token (its hash only); the id.

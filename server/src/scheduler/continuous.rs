@@ -1,6 +1,7 @@
 //! Continuous mode: which match to queue when the queue is empty.
 
-use crate::{db, AppState};
+use crate::db;
+use crate::state::AppState;
 
 /// Queues one continuous-mode match if the queue is empty; true if it did.
 pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {

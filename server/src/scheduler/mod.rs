@@ -41,7 +41,8 @@ use std::time::Duration;
 use tokio::sync::Notify;
 use tokio::task::JoinHandle;
 
-use crate::{db, AppState};
+use crate::db;
+use crate::state::AppState;
 
 /// This process's match workers: `settings.workers` tasks and the heartbeat that renews their leases.
 pub struct Workers {
@@ -62,7 +63,7 @@ impl Workers {
             });
         }
         let lease_ms = state.settings.lease_ms();
-        let host = crate::hostname();
+        let host = crate::settings::hostname();
         db::workers::register(
             &state.pool,
             &state.worker,

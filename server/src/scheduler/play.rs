@@ -6,22 +6,17 @@ use std::time::Duration;
 use agents::factory::PlayerSpec;
 use agents::matchrun::MatchSpec;
 
-use crate::{db, AppState};
+use crate::db;
+use crate::state::AppState;
 
-/// Builds the player recipe of a stored agent.
+/// The player recipe of a stored agent, from the workers' cache (blocking on a miss: the checkpoint
+/// is parsed and its network built).
 pub fn player_spec(
     state: &AppState,
     kind: db::AgentKind,
     spec: &str,
 ) -> Result<PlayerSpec, String> {
-    match kind {
-        db::AgentKind::Scripted => {
-            PlayerSpec::scripted(spec).ok_or_else(|| format!("unknown scripted agent '{spec}'"))
-        }
-        db::AgentKind::Checkpoint => agents::checkpoint::Checkpoint::from_json(spec, &state.model)
-            .map(|c| PlayerSpec::Checkpoint(Arc::new(c)))
-            .map_err(|e| e.to_string()),
-    }
+    state.players.get(&state.model, kind, spec)
 }
 
 /// The match runner's recipe for stored match `m`: its preset and simulator version must be this
@@ -50,7 +45,7 @@ pub fn match_spec(state: &AppState, m: &db::Match) -> Result<MatchSpec, String> 
 }
 
 /// Plays stored match `m` to completion (blocking: call it off the async runtime). While anyone
-/// watches, the match's live channel gets the frames of the rally being played, [`crate::LIVE_CHUNK`]
+/// watches, the match's live channel gets the frames of the rally being played, [`crate::live::LIVE_CHUNK`]
 /// at a time with body poses, and each rally's record as it ends (the frames are recorded for that
 /// even when the match stores none, which changes no result). Sending never waits: a full channel
 /// drops its oldest message for a viewer that lags.
@@ -59,6 +54,7 @@ pub fn play(
     m: &db::Match,
     a: &PlayerSpec,
     b: &PlayerSpec,
+    claimed: std::time::Instant,
 ) -> Result<(agents::matchrun::MatchRecord, agents::matchrun::Replay), String> {
     use agents::matchrun::MatchEvent;
     let spec = agents::matchrun::MatchSpec {
@@ -77,7 +73,7 @@ pub fn play(
     ];
     // Frames of the current rally not sent yet, and how many it has recorded (the last of `chunk`
     // is frame `recorded - 1`).
-    let mut chunk: Vec<agents::matchrun::Frame> = Vec::with_capacity(crate::LIVE_CHUNK);
+    let mut chunk: Vec<agents::matchrun::Frame> = Vec::with_capacity(crate::live::LIVE_CHUNK);
     let mut recorded = 0usize;
     let head = |k: u32| {
         format!(
@@ -87,22 +83,28 @@ pub fn play(
             agents::matchrun::REPLAY_HZ
         )
     };
-    let send_frames =
-        |tx: &crate::LiveChannel, k: u32, recorded: usize, chunk: &[agents::matchrun::Frame]| {
-            let first = recorded - chunk.len();
-            let frames = serde_json::to_string(chunk)
-                .map_err(|e| e.to_string())
-                .and_then(|f| crate::replay::with_body_poses(&state.model, &f));
-            if let Ok(frames) = frames {
-                let data = format!("{{{},\"first\":{first},\"frames\":{frames}}}", head(k));
-                let _ = tx.send(Arc::new(crate::LiveMsg {
-                    event: "frames",
-                    data,
-                }));
-            }
-        };
+    let send_frames = |tx: &crate::live::LiveChannel,
+                       k: u32,
+                       recorded: usize,
+                       chunk: &[agents::matchrun::Frame]| {
+        let first = recorded - chunk.len();
+        let frames = serde_json::to_string(chunk)
+            .map_err(|e| e.to_string())
+            .and_then(|f| crate::replay::with_body_poses(&state.model, &f));
+        if let Ok(frames) = frames {
+            let data = format!("{{{},\"first\":{first},\"frames\":{frames}}}", head(k));
+            let _ = tx.send(Arc::new(crate::live::LiveMsg {
+                event: "frames",
+                data,
+            }));
+        }
+    };
+    let mut first = true;
     let (record, mut replay) =
         agents::matchrun::play_match_with(&spec, players, [a.name(), b.name()], &mut |e| {
+            if std::mem::take(&mut first) {
+                state.players.record_setup(claimed.elapsed());
+            }
             let watched = live.as_ref().filter(|tx| tx.receiver_count() > 0);
             match e {
                 MatchEvent::Frame { rally, frame } => {
@@ -113,7 +115,7 @@ pub fn play(
                         return;
                     };
                     chunk.push(frame.clone());
-                    if chunk.len() >= crate::LIVE_CHUNK {
+                    if chunk.len() >= crate::live::LIVE_CHUNK {
                         send_frames(tx, rally, recorded, &chunk);
                         chunk.clear();
                     }
@@ -128,7 +130,7 @@ pub fn play(
                             head(rally),
                             serde_json::to_string(record).unwrap_or_else(|_| "null".into())
                         );
-                        let _ = tx.send(Arc::new(crate::LiveMsg {
+                        let _ = tx.send(Arc::new(crate::live::LiveMsg {
                             event: "rally",
                             data,
                         }));
@@ -171,11 +173,15 @@ pub(super) async fn run_one(
     m: db::Match,
     lease: db::Lease,
 ) -> anyhow::Result<()> {
+    let claimed = std::time::Instant::now();
     // The live channel first: the match is `running` from its claim on, so a viewer may ask for
     // its feed before the agents' specs are read (seen in CI: 409 while the specs were fetched).
     let id = m.id;
     if let Ok(mut live) = state.live.lock() {
-        live.insert(id, tokio::sync::broadcast::channel(crate::LIVE_BUFFER).0);
+        live.insert(
+            id,
+            tokio::sync::broadcast::channel(crate::live::LIVE_BUFFER).0,
+        );
     }
     // Dropping the channel when this function returns ends every live viewer's stream.
     struct Unregister(AppState, i64);
@@ -209,7 +215,7 @@ pub(super) async fn run_one(
     let result = tokio::task::spawn_blocking(move || {
         let a = player_spec(&st, ka, &sa)?;
         let b = player_spec(&st, kb, &sb)?;
-        play(&st, &m, &a, &b)
+        play(&st, &m, &a, &b, claimed)
     })
     .await;
     let (stored, status) = match result {

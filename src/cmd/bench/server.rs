@@ -116,14 +116,37 @@ pub(super) fn proc_status_kib(pid: u32, key: &str) -> Option<f64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-/// `rally bench server`: a real server (this binary, `serve`, fresh database, 2 workers, no
-/// continuous mode) measured from outside: matches per hour, then leaderboard and health-check
-/// throughput and latency while two long matches run, then the server's peak memory.
-pub fn server_bench(seconds: f64, clients: usize) -> anyhow::Result<serde_json::Value> {
+/// GETs `path` (as plain text: the metrics) with a fresh connection.
+fn get_text(addr: &str, path: &str) -> anyhow::Result<String> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr)?;
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )?;
+    let mut resp = String::new();
+    s.read_to_string(&mut resp)?;
+    Ok(resp
+        .split_once("\r\n\r\n")
+        .map(|x| x.1)
+        .unwrap_or("")
+        .to_string())
+}
+
+/// A sample's value in the server's metrics.
+fn metric(addr: &str, name: &str) -> anyhow::Result<f64> {
+    let text = get_text(addr, "/api/v1/metrics")?;
+    text.lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.trim().parse().ok())
+        .ok_or_else(|| anyhow!("no metric {name} in the server's answer"))
+}
+
+/// A `rally serve` of this binary on SQLite file `db` (2 workers, no continuous mode), with the
+/// settings `toml` changes; returns it and its address.
+fn start_server(db: &std::path::Path, toml: &str) -> anyhow::Result<(std::process::Child, String)> {
     use std::io::BufRead;
-    let dir = std::env::temp_dir().join(format!("rally-bench-server-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir)?;
+    let config = db.with_extension("toml");
+    std::fs::write(&config, toml)?;
     let mut child = Command::new(std::env::current_exe()?)
         .args([
             "serve",
@@ -132,87 +155,158 @@ pub fn server_bench(seconds: f64, clients: usize) -> anyhow::Result<serde_json::
             "--workers",
             "2",
             "--no-continuous",
-            "--db",
         ])
-        .arg(dir.join("bench.db"))
+        .arg("--config")
+        .arg(&config)
+        .arg("--db")
+        .arg(db)
         .env("RUST_LOG", "warn")
         .env("RALLY_ADMIN_TOKEN", BENCH_TOKEN)
         .stdout(std::process::Stdio::piped())
         .spawn()
         .context("starting rally serve")?;
+    let mut line = String::new();
+    let read = child
+        .stdout
+        .take()
+        .context("stdout")
+        .and_then(|out| Ok(std::io::BufReader::new(out).read_line(&mut line)?));
+    let addr = line
+        .trim()
+        .strip_prefix("listening on http://")
+        .map(str::to_string);
+    match (read, addr) {
+        (Ok(_), Some(addr)) => Ok((child, addr)),
+        (read, _) => {
+            let _ = child.kill();
+            let _ = child.wait();
+            read?;
+            Err(anyhow!("unexpected first line {line:?}"))
+        }
+    }
+}
+
+/// Plays 12 matches of 20 rallies among `agents` (by name) on 2 workers; returns the matches per
+/// hour and the server's mean setup time of a match (claim to first frame), s.
+fn matches_per_hour(addr: &str, agents: [&str; 3]) -> anyhow::Result<(f64, f64)> {
+    let (setups0, sum0) = (
+        metric(addr, "rally_match_setup_seconds_count")?,
+        metric(addr, "rally_match_setup_seconds_sum")?,
+    );
+    let t0 = Instant::now();
+    let mut ids = Vec::new();
+    for k in 0..12 {
+        let (a, b) = (agents[k % 3], agents[(k + 1) % 3]);
+        let m = call_json(
+            addr,
+            "POST",
+            "/api/v1/matches",
+            &format!("{{\"a\":\"{a}\",\"b\":\"{b}\",\"rallies\":20,\"seed\":{k}}}"),
+        )?;
+        ids.push(
+            m["id"]
+                .as_i64()
+                .ok_or_else(|| anyhow!("queueing failed: {m}"))?,
+        );
+    }
+    loop {
+        // One request a poll: the workers share the machine with this loop.
+        let list = call_json(addr, "GET", "/api/v1/matches?limit=1000", "")?;
+        let ours: Vec<&serde_json::Value> = list["matches"]
+            .as_array()
+            .map(|all| {
+                all.iter()
+                    .filter(|m| m["id"].as_i64().is_some_and(|id| ids.contains(&id)))
+                    .collect()
+            })
+            .unwrap_or_default();
+        if let Some(m) = ours.iter().find(|m| m["status"] == "failed") {
+            return Err(anyhow!("a benchmark match failed: {m}"));
+        }
+        if ours.len() == ids.len() && ours.iter().all(|m| m["status"] == "done") {
+            break;
+        }
+        anyhow::ensure!(
+            t0.elapsed() < Duration::from_secs(600),
+            "matches did not finish in 10 minutes"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let per_hour = ids.len() as f64 / t0.elapsed().as_secs_f64() * 3600.0;
+    let setups = metric(addr, "rally_match_setup_seconds_count")? - setups0;
+    let setup = (metric(addr, "rally_match_setup_seconds_sum")? - sum0) / setups.max(1.0);
+    Ok((per_hour, setup))
+}
+
+/// The trained built-ins the checkpoint phases play with.
+const CHECKPOINT_AGENTS: [&str; 3] = ["kmac", "muscle-ppo", "dynsyn"];
+
+/// `rally bench server`: a real server (this binary, `serve`, fresh database, 2 workers, no
+/// continuous mode) measured from outside: matches per hour — the scripted built-ins', then the
+/// trained checkpoints' with every match building its players (`player_cache = 0`) and with the
+/// workers' cache, on one store — then leaderboard and health-check throughput and latency while two
+/// long matches run, then the server's peak memory.
+pub fn server_bench(seconds: f64, clients: usize) -> anyhow::Result<serde_json::Value> {
+    let dir = std::env::temp_dir().join(format!("rally-bench-server-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    let db = dir.join("bench.db");
     let result = (|| -> anyhow::Result<serde_json::Value> {
-        let mut line = String::new();
-        std::io::BufReader::new(child.stdout.take().context("stdout")?).read_line(&mut line)?;
-        let addr = line
-            .trim()
-            .strip_prefix("listening on http://")
-            .ok_or_else(|| anyhow!("unexpected first line {line:?}"))?
-            .to_string();
-        // Matches per hour: 12 matches of 20 rallies between the built-ins, 2 workers.
-        let pairs = [(1, 2), (2, 3), (3, 1)];
-        let t0 = Instant::now();
-        let mut ids = Vec::new();
-        for k in 0..12 {
-            let (a, b) = pairs[k % 3];
-            let m = call_json(
-                &addr,
-                "POST",
-                "/api/v1/matches",
-                &format!("{{\"a\":{a},\"b\":{b},\"rallies\":20,\"seed\":{k}}}"),
-            )?;
-            ids.push(
-                m["id"]
-                    .as_i64()
-                    .ok_or_else(|| anyhow!("queueing failed: {m}"))?,
-            );
-        }
-        loop {
-            let done = call_json(&addr, "GET", "/api/v1/matches?status=done&limit=1000", "")?;
-            if done["matches"].as_array().map_or(0, |m| m.len()) >= ids.len() {
-                break;
+        // Without the cache first (its start qualifies the built-ins into the store).
+        let (mut child, addr) = start_server(&db, "player_cache = 0\n")?;
+        let uncached = matches_per_hour(&addr, CHECKPOINT_AGENTS);
+        let _ = child.kill();
+        let _ = child.wait();
+        let uncached = uncached?;
+        let (mut child, addr) = start_server(&db, "")?;
+        let r = (|| -> anyhow::Result<serde_json::Value> {
+            let cached = matches_per_hour(&addr, CHECKPOINT_AGENTS)?;
+            let loads = metric(&addr, "rally_player_loads_total")?;
+            let scripted =
+                matches_per_hour(&addr, ["scripted", "scripted-drive", "scripted-soft"])?;
+            // Two long matches keep both workers busy during the load.
+            let mut long = Vec::new();
+            for (a, b) in [(1, 2), (3, 1)] {
+                let m = call_json(
+                    &addr,
+                    "POST",
+                    "/api/v1/matches",
+                    &format!("{{\"a\":{a},\"b\":{b},\"rallies\":1000,\"seed\":99}}"),
+                )?;
+                long.push(m["id"].as_i64().unwrap_or(0));
             }
-            anyhow::ensure!(
-                t0.elapsed() < Duration::from_secs(600),
-                "matches did not finish in 10 minutes"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let per_hour = ids.len() as f64 / t0.elapsed().as_secs_f64() * 3600.0;
-        // Two long matches keep both workers busy during the load.
-        let mut long = Vec::new();
-        for (a, b) in [(1, 2), (3, 1)] {
-            let m = call_json(
-                &addr,
-                "POST",
-                "/api/v1/matches",
-                &format!("{{\"a\":{a},\"b\":{b},\"rallies\":1000,\"seed\":99}}"),
-            )?;
-            long.push(m["id"].as_i64().unwrap_or(0));
-        }
-        std::thread::sleep(Duration::from_millis(300));
-        let running = call_json(&addr, "GET", "/api/v1/matches?status=running", "")?;
-        let running = running["matches"].as_array().map_or(0, |m| m.len());
-        let board = load(&addr, "/api/v1/leaderboard", clients, seconds)?;
-        let health = load(&addr, "/api/v1/healthz", clients, seconds)?;
-        for id in long {
-            let _ = call_json(&addr, "DELETE", &format!("/api/v1/matches/{id}"), "");
-        }
-        let pid = child.id();
-        Ok(json!({
-            "target": "server",
-            "workers": 2,
-            "clients": clients,
-            "matches_per_hour_20_rallies": per_hour,
-            "matches_running_during_load": running,
-            "leaderboard": {"requests_per_second": board.0, "p50_ms": board.1 * 1e3, "p99_ms": board.2 * 1e3},
-            "healthz": {"requests_per_second": health.0, "p50_ms": health.1 * 1e3, "p99_ms": health.2 * 1e3},
-            "leaderboard_vs_healthz_throughput": board.0 / health.0,
-            "server_peak_rss_mib": proc_status_kib(pid, "VmHWM:").map(|k| k / 1024.0),
-            "server_rss_mib": proc_status_kib(pid, "VmRSS:").map(|k| k / 1024.0),
-        }))
+            std::thread::sleep(Duration::from_millis(300));
+            let running = call_json(&addr, "GET", "/api/v1/matches?status=running", "")?;
+            let running = running["matches"].as_array().map_or(0, |m| m.len());
+            let board = load(&addr, "/api/v1/leaderboard", clients, seconds)?;
+            let health = load(&addr, "/api/v1/healthz", clients, seconds)?;
+            for id in long {
+                let _ = call_json(&addr, "DELETE", &format!("/api/v1/matches/{id}"), "");
+            }
+            let pid = child.id();
+            Ok(json!({
+                "target": "server",
+                "workers": 2,
+                "clients": clients,
+                "matches_per_hour_20_rallies": scripted.0,
+                "checkpoints": {
+                    "agents": CHECKPOINT_AGENTS,
+                    "uncached": {"matches_per_hour": uncached.0, "setup_ms": uncached.1 * 1e3},
+                    "cached": {"matches_per_hour": cached.0, "setup_ms": cached.1 * 1e3},
+                    "player_loads": loads,
+                },
+                "matches_running_during_load": running,
+                "leaderboard": {"requests_per_second": board.0, "p50_ms": board.1 * 1e3, "p99_ms": board.2 * 1e3},
+                "healthz": {"requests_per_second": health.0, "p50_ms": health.1 * 1e3, "p99_ms": health.2 * 1e3},
+                "leaderboard_vs_healthz_throughput": board.0 / health.0,
+                "server_peak_rss_mib": proc_status_kib(pid, "VmHWM:").map(|k| k / 1024.0),
+                "server_rss_mib": proc_status_kib(pid, "VmRSS:").map(|k| k / 1024.0),
+            }))
+        })();
+        let _ = child.kill();
+        let _ = child.wait();
+        r
     })();
-    let _ = child.kill();
-    let _ = child.wait();
     let _ = std::fs::remove_dir_all(&dir);
     result
 }

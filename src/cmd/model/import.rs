@@ -27,7 +27,7 @@ pub const MYOCHALLENGE_FILE: &str = "models/myochallenge.xml";
 /// Arguments of `rally model import`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "The model is written to DATA/models/myochallenge.xml (DATA: $RALLY_DATA_DIR, else ./data), \
+    after_help = "The model is written to DATA/models/myochallenge.xml (DATA: $RALLY_DATA_DIR, else ~/.local/share/muscle-rally), \
 where `--model myochallenge` finds it. Without --python, myosuite is installed from PyPI into \
 DATA/venv-myosuite (about 300 MB, a few minutes the first time; reused afterwards)."
 )]

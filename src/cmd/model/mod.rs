@@ -51,12 +51,10 @@ enum ModelCommand {
     Import(import::ImportArgs),
 }
 
-/// Where muscle-rally keeps what it fetches or builds at set-up (imported models, their Python
-/// environment): `$RALLY_DATA_DIR`, else `data/` in the working directory.
+/// Where muscle-rally keeps what it fetches or builds at set-up (see [`server::data_dir`]:
+/// `$RALLY_DATA_DIR`, else the user's data directory, whatever the working directory).
 pub fn data_dir() -> PathBuf {
-    std::env::var_os("RALLY_DATA_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("data"))
+    server::data_dir()
 }
 
 /// A MODEL argument: `default`, `myochallenge`, or a file. Returns the model and what to call it.

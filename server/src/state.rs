@@ -1,0 +1,118 @@
+//! What the handlers and workers share ([`AppState`]), the budgets a token spends, and opening it.
+
+use std::sync::Arc;
+
+use tokio::sync::Notify;
+
+use crate::db::{self, Pool};
+use crate::live::{EventKind, LiveChannel, ServerEvent, EVENT_BUFFER};
+use crate::settings::Settings;
+use crate::{domain, ratings};
+
+/// A leaderboard with the agent count and finished-match count it was computed from.
+pub type CachedBoard = (usize, i64, Arc<ratings::Leaderboard>);
+
+/// Everything the handlers and workers share.
+#[derive(Clone)]
+pub struct AppState {
+    /// This process's worker name (see [`Settings::worker`]).
+    pub worker: Arc<String>,
+    /// The database.
+    pub pool: Pool,
+    /// The robot model both sides play with.
+    pub model: Arc<sim::model::Model>,
+    /// Arena constants.
+    pub arena: sim::config::ArenaConfig,
+    /// Settings.
+    pub settings: Arc<Settings>,
+    /// Wakes the workers when a match is queued.
+    pub wake: Arc<Notify>,
+    /// The last leaderboard computed, with the number of finished matches it was computed from.
+    pub board: Arc<tokio::sync::Mutex<Option<CachedBoard>>>,
+    /// What each submitter token spent of its budgets recently (when, how much).
+    pub rate: Arc<std::sync::Mutex<RateLog>>,
+    /// One qualification at a time: submissions wait their turn instead of piling up on the CPU.
+    pub qualify: Arc<tokio::sync::Semaphore>,
+    /// One checkpoint validation at a time, off the async threads ([`validate_checkpoint`]).
+    pub validate: Arc<tokio::sync::Semaphore>,
+    /// What changed, for the event stream's subscribers.
+    pub events: tokio::sync::broadcast::Sender<ServerEvent>,
+    /// Running matches that can be watched live: the frames of the rally being played (with body
+    /// poses, as JSON) and each rally's record go to the match's channel, which its worker drops
+    /// when the match ends.
+    pub live: Arc<std::sync::Mutex<std::collections::HashMap<i64, LiveChannel>>>,
+    /// Replays of matches that kept no frames are re-simulated, as many at a time as there are workers.
+    pub resim: Arc<tokio::sync::Semaphore>,
+    /// The agents' built players, shared by the workers and the re-simulations.
+    pub players: Arc<crate::players::PlayerCache>,
+}
+
+/// The budgets a submitter token spends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Budget {
+    /// Matches queued, per minute.
+    Matches,
+    /// Agents submitted, per hour.
+    Agents,
+}
+
+/// Per (submitter token id, budget), the (time, amount) of its recent requests.
+pub type RateLog =
+    std::collections::HashMap<(i64, Budget), std::collections::VecDeque<(std::time::Instant, u32)>>;
+
+impl AppState {
+    /// Publishes an event to every subscriber; never waits (a subscriber that lags loses the oldest
+    /// events, not the sender's time), and having no subscriber is fine.
+    pub fn publish_match(&self, id: i64, status: domain::MatchStatus) {
+        let _ = self.events.send(ServerEvent {
+            kind: EventKind::Match,
+            id,
+            status: Some(status),
+        });
+    }
+
+    /// Publishes that agent `id` was registered (see [`AppState::publish_match`]).
+    pub fn publish_agent(&self, id: i64) {
+        let _ = self.events.send(ServerEvent {
+            kind: EventKind::Agent,
+            id,
+            status: None,
+        });
+    }
+}
+
+/// The state a process that plays matches needs (`rally serve`, `rally worker`): the database
+/// open and migrated, the model loaded, matches whose lease ran out queued again.
+pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
+    let pool = db::open(&settings.db).await?;
+    let requeued = db::workers::requeue_expired(&pool, db::workers::now_ms()).await?;
+    if requeued > 0 {
+        tracing::info!(
+            requeued,
+            "re-queued running matches whose worker's lease ran out"
+        );
+    }
+    let model = Arc::new(sim::mjcf::parse_str(
+        sim::config::DEFAULT_MODEL_XML,
+        "config/models/upper_body.xml",
+    )?);
+    let workers = settings.workers.max(1);
+    let worker = Arc::new(settings.worker());
+    let players = Arc::new(crate::players::PlayerCache::new(settings.player_cache));
+    Ok(AppState {
+        worker,
+        pool,
+        model,
+        arena: sim::config::ArenaConfig::default(),
+        settings: Arc::new(settings),
+        wake: Arc::new(Notify::new()),
+        board: Arc::new(tokio::sync::Mutex::new(None)),
+        rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
+        qualify: Arc::new(tokio::sync::Semaphore::new(1)),
+        validate: Arc::new(tokio::sync::Semaphore::new(1)),
+        events: tokio::sync::broadcast::channel(EVENT_BUFFER).0,
+        live: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
+        resim: Arc::new(tokio::sync::Semaphore::new(workers)),
+        players,
+    })
+}
