@@ -197,7 +197,7 @@ fn workers_killed_and_stopped_mid_match_lose_nothing_and_store_nothing_twice() {
 /// A tournament and an SPRT, queued on `addr`; returns their ids.
 fn queue_contests(addr: &str) -> (i64, i64) {
     let t = NewTournament {
-        kind: "round_robin".into(),
+        kind: server::wire::TournamentKind::RoundRobin,
         agents: vec![
             "scripted".into(),
             "scripted-drive".into(),

@@ -27,7 +27,6 @@ pub mod scheduler;
 mod settings;
 mod state;
 pub mod tournament;
-pub mod wire;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -36,6 +35,8 @@ use tokio::sync::Notify;
 
 /// The agents crate the server schedules matches with.
 pub use agents;
+/// The API's types (the handlers answer with them).
+pub use wire;
 
 pub use admission::*;
 pub use live::*;

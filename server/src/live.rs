@@ -3,30 +3,7 @@
 
 use std::sync::Arc;
 
-use crate::domain;
-
-/// What changed on the server, as `GET /api/v1/events` streams it (server-sent events): a match
-/// queued, started, finished, failed or cancelled, or an agent registered.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ServerEvent {
-    /// What it is about.
-    pub kind: EventKind,
-    /// The match's or the agent's id.
-    pub id: i64,
-    /// A match's new status; none for agents.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub status: Option<domain::MatchStatus>,
-}
-
-/// What a [`ServerEvent`] is about.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum EventKind {
-    /// A match (queued, running, done, failed, cancelled).
-    Match,
-    /// An agent (registered).
-    Agent,
-}
+pub use wire::{EventKind, ServerEvent};
 
 /// Events kept for a slow subscriber before it starts missing some (it is told, and refreshes).
 pub const EVENT_BUFFER: usize = 256;

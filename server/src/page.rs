@@ -61,7 +61,7 @@ mod tests {
             k.sort();
             k
         };
-        let m = crate::db::Match::example(1, 1, 2);
+        let m = crate::db::example_match(1, 1, 2);
         assert_eq!(keys("Match"), fields(serde_json::to_value(m).unwrap()));
         let a = crate::db::Agent {
             id: 1,

@@ -9,7 +9,7 @@
 
 use std::collections::HashMap;
 
-use serde::{Deserialize, Serialize};
+pub use wire::{Leaderboard, LeaderboardRow as Row};
 
 /// What the leaderboard knows of an agent (the store's agent row, minus what rating does not need).
 #[derive(Debug, Clone, PartialEq)]
@@ -69,60 +69,6 @@ pub fn bradley_terry_from(wins: &[Vec<f64>], start: Option<&[f64]>) -> Vec<f64> 
         }
     }
     gamma.iter().map(|g| 1500.0 + 400.0 * g.log10()).collect()
-}
-
-/// One leaderboard row.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Row {
-    /// 1-based rank by rating.
-    pub rank: usize,
-    /// Agent id.
-    pub agent_id: i64,
-    /// Agent name.
-    pub agent: String,
-    /// Built in.
-    pub builtin: bool,
-    /// Bradley–Terry rating (Elo scale).
-    pub rating: f64,
-    /// 95% bootstrap interval (null without a finished match against another agent).
-    pub rating_low: Option<f64>,
-    /// Upper end.
-    pub rating_high: Option<f64>,
-    /// Finished rated matches: against another agent (points won and the rating come from these).
-    pub matches: usize,
-    /// Finished cooperative matches against itself: they rate nothing and count in the rally
-    /// lengths and drift only.
-    #[serde(default)]
-    pub self_play_matches: usize,
-    /// Points won / points decided, in percent (null without points).
-    pub points_won_pct: Option<f64>,
-    /// Mean rally length over its matches' rallies (each rally counts once).
-    pub mean_rally_length: Option<f64>,
-    /// Longest rally it played.
-    pub max_rally_length: Option<i64>,
-    /// Fraction of the crossings it is answerable for — the serves and its own returns — inside the
-    /// serve box (pooled over its matches' crossings, as its page shows it).
-    pub in_box_fraction: Option<f64>,
-    /// Energy distance between the serves' crossings and its own returns' (mean over its matches
-    /// that have one): how far its returns drift from the serve distribution.
-    pub drift: Option<f64>,
-    /// Glicko-2 rating (online, one game per match, in the order matches finished).
-    pub glicko2: f64,
-    /// Its rating deviation.
-    pub glicko2_deviation: f64,
-    /// Qualification hit rate (checkpoints).
-    pub hit_rate: Option<f64>,
-    /// Qualification success rate.
-    pub success_rate: Option<f64>,
-}
-
-/// The leaderboard.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Leaderboard {
-    /// Finished matches it is computed from.
-    pub matches: usize,
-    /// Rows, best first.
-    pub rows: Vec<Row>,
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {

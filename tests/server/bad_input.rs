@@ -193,10 +193,26 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
         (
             "replay of unknown",
             "GET",
-            "/api/v1/matches/5/replay?rally=x",
+            "/api/v1/matches/5/replay?rally=0",
             vec![],
             vec![],
             404,
+        ),
+        (
+            "replay of a rally that is no index",
+            "GET",
+            "/api/v1/matches/5/replay?rally=x",
+            vec![],
+            vec![],
+            400,
+        ),
+        (
+            "matches of a status that does not exist",
+            "GET",
+            "/api/v1/matches?status=lost",
+            vec![],
+            vec![],
+            400,
         ),
         (
             "no token",
@@ -340,7 +356,7 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
             "/api/v1/tournaments",
             authed.to_vec(),
             br#"{"kind":"swiss","agents":[1,2],"rallies_per_match":2}"#.to_vec(),
-            400,
+            422,
         ),
         (
             "tournament of one agent",
@@ -523,6 +539,27 @@ fn bad_input_gets_a_json_4xx_and_writes_nothing() {
                 .is_some_and(|m| !m.is_empty()),
             "{what}: {v}"
         );
+    }
+    // A query string is read as its type: the parameter at fault is named.
+    for (path, field, says) in [
+        ("/api/v1/matches?limit=abc", "limit", "invalid digit"),
+        (
+            "/api/v1/matches?status=lost",
+            "status",
+            "unknown variant `lost`",
+        ),
+        ("/api/v1/agents?all=2", "all", "must be 1 or 0"),
+        (
+            "/api/v1/tournaments?bogus=1",
+            "bogus",
+            "unknown field `bogus`",
+        ),
+    ] {
+        let (code, v) = call(a, "GET", path, None, None);
+        assert_eq!(code, 400, "{path}: {v}");
+        assert_eq!(v["error"]["field"], field, "{path}: {v}");
+        let message = v["error"]["message"].as_str().unwrap_or_default();
+        assert!(message.contains(says), "{path}: {v}");
     }
     // Nothing was written.
     let (_, agents) = call(a, "GET", "/api/v1/agents", None, None);

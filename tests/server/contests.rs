@@ -76,7 +76,7 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
 
     // A round robin of the three built-ins, two rounds: 6 matches, charged to the token (6 of 8).
     let rr = NewTournament {
-        kind: "round_robin".into(),
+        kind: wire::TournamentKind::RoundRobin,
         agents: vec!["scripted".into(), 2.into(), "scripted-soft".into()],
         rallies_per_match: 3,
         rounds: 2,
@@ -124,7 +124,7 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         .unwrap();
     assert!((1..=61).contains(&retry), "{retry}");
     let gauntlet = NewTournament {
-        kind: "gauntlet".into(),
+        kind: wire::TournamentKind::Gauntlet,
         agents: vec![1.into(), 2.into()],
         rallies_per_match: 1,
         rounds: 1,

@@ -5,22 +5,12 @@ use super::*;
 /// `GET /agents`: the agents that play; `?all=1` the retired ones too.
 pub(super) async fn list_agents(
     State(s): State<AppState>,
-    Query(q): Query<HashMap<String, String>>,
-) -> ApiResult<Json<Value>> {
-    only_params(&q, &["all"])?;
-    let all = match q.get("all").map(String::as_str) {
-        None | Some("0") | Some("false") => false,
-        Some("1") | Some("true") => true,
-        Some(x) => {
-            return Err(ApiError::bad(
-                "all",
-                format!("all must be 1 or 0, not '{x}'"),
-            ))
-        }
-    };
+    Typed(q): Typed<wire::AgentsQuery>,
+) -> ApiResult<Json<wire::AgentList>> {
+    let all = q.all;
     let mut agents = db::agents(&s.pool).await?;
     agents.retain(|a| all || a.retired_at.is_none());
-    Ok(Json(json!(wire::AgentList { agents })))
+    Ok(Json(wire::AgentList { agents }))
 }
 
 /// `DELETE /agents/{id}`: retires the agent (its owner's token or the admin's). It keeps its row,
@@ -29,7 +19,7 @@ pub(super) async fn retire_agent(
     State(s): State<AppState>,
     headers: HeaderMap,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<db::Agent>> {
     let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
     let agent = db::agent(&s.pool, id)
@@ -53,13 +43,13 @@ pub(super) async fn retire_agent(
     let agent = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| anyhow::anyhow!("agent {id} vanished after its retirement"))?;
-    Ok(Json(json!(agent)))
+    Ok(Json(agent))
 }
 
 pub(super) async fn get_agent(
     State(s): State<AppState>,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<wire::AgentDetail>> {
     let id = parse_id(&id, "id")?;
     let a = db::agent(&s.pool, id)
         .await?
@@ -72,7 +62,7 @@ pub(super) async fn get_agent(
             .filter(|t| !t.is_null()),
         _ => None,
     };
-    Ok(Json(json!(wire::AgentDetail {
+    Ok(Json(wire::AgentDetail {
         row: a,
         drift: db::agent_drift_summary(&s.pool, id).await?,
         rally_lengths: db::agent_rally_lengths(&s.pool, id)
@@ -81,7 +71,7 @@ pub(super) async fn get_agent(
             .map(|(length, rallies)| wire::RallyCount { length, rallies })
             .collect(),
         training,
-    })))
+    }))
 }
 
 /// Agent names: 1–64 characters of `A–Z a–z 0–9 _ . -`, not starting with `.` or `-`.
@@ -111,7 +101,7 @@ pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<wire::Submi
             "checkpoint" => {
                 let bytes = field.bytes().await.map_err(bad_part)?;
                 let v: Value = serde_json::from_slice(&bytes).map_err(|e| ApiError {
-                    field: Some("checkpoint"),
+                    field: Some("checkpoint".into()),
                     ..ApiError::new(
                         StatusCode::UNPROCESSABLE_ENTITY,
                         "invalid_checkpoint",
@@ -129,7 +119,7 @@ pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<wire::Submi
         }
     }
     let missing = |f: &'static str| ApiError {
-        field: Some(f),
+        field: Some(f.into()),
         ..ApiError::new(
             StatusCode::UNPROCESSABLE_ENTITY,
             "missing_field",
@@ -168,7 +158,7 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         Ok(c) => c,
         Err(crate::admission::Refused::Invalid(e)) => {
             return Err(ApiError {
-                field: Some("checkpoint"),
+                field: Some("checkpoint".into()),
                 ..ApiError::new(
                     StatusCode::UNPROCESSABLE_ENTITY,
                     "invalid_checkpoint",
@@ -178,7 +168,7 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         }
         Err(crate::admission::Refused::OverBudget(budget)) => {
             return Err(ApiError {
-                field: Some("checkpoint"),
+                field: Some("checkpoint".into()),
                 ..ApiError::new(
                     StatusCode::UNPROCESSABLE_ENTITY,
                     "over_budget",
@@ -195,13 +185,13 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     let mut report = crate::admission::qualify(&s, spec)
         .await?
         .map_err(|e| ApiError {
-            field: Some("checkpoint"),
+            field: Some("checkpoint".into()),
             ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
         })?;
     // The report names the agent as submitted (not the checkpoint's inner name).
     report.agent = body.name.clone();
     crate::admission::admits(&s.settings, &report).map_err(|e| ApiError {
-        field: Some("checkpoint"),
+        field: Some("checkpoint".into()),
         ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "below_qualification", e)
     })?;
     let qual = (
@@ -236,10 +226,38 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         .ok_or_else(|| anyhow::anyhow!("agent {id} vanished after its insert"))?;
     Ok((
         StatusCode::CREATED,
-        Json(json!(wire::Submitted {
+        Json(wire::Submitted {
             agent,
-            qualification: report
-        })),
+            qualification: qualification(report),
+        }),
     )
         .into_response())
+}
+
+/// A qualification's report as the API shows it.
+fn qualification(r: ::agents::eval::EvalReport) -> wire::Qualification {
+    let rate = |r: ::agents::eval::Rate| wire::Interval {
+        value: r.value,
+        low: r.low,
+        high: r.high,
+    };
+    let mean = |m: ::agents::eval::Mean| wire::Interval {
+        value: m.value,
+        low: m.low,
+        high: m.high,
+    };
+    wire::Qualification {
+        agent: r.agent,
+        serve: r.serve,
+        seed: r.seed,
+        episodes: r.episodes,
+        hit_rate: rate(r.hit_rate),
+        success_rate: rate(r.success_rate),
+        effort: mean(r.effort),
+        mean_activation: mean(r.mean_activation),
+        activation_to_contact: r.activation_to_contact.map(mean),
+        activation_after_contact: r.activation_after_contact.map(mean),
+        after_contact_steps: r.after_contact_steps,
+        ends: r.ends,
+    }
 }

@@ -1,28 +1,19 @@
 //! Tournaments, SPRTs and rating history: `/tournaments`, `/sprt`, `/agents/{id}/ratings`.
 
-use std::collections::HashMap;
-
 use axum::extract::rejection::JsonRejection;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use serde_json::{json, Value};
 
 use super::{
-    agent_or_404, charge, check_token, limit_param, may_cancel, only_params, parse_id,
-    seed_or_clock, submitter, ApiError, ApiResult,
+    agent_or_404, charge, check_token, limit_of, may_cancel, parse_id, seed_or_clock, submitter,
+    ApiError, ApiResult, Typed,
 };
 use crate::state::{AppState, Budget};
-use crate::tournament::{self, Kind};
-use crate::wire::{self, ContestMatch, NamedAgent};
+use crate::tournament;
 use crate::{db, ratings};
-
-/// `?limit=` (1–1000, default 100); any other parameter is refused.
-fn limit_only(q: &HashMap<String, String>) -> ApiResult<i64> {
-    only_params(q, &["limit"])?;
-    limit_param(q, 100, 1000)
-}
+use wire::{self, ContestMatch, NamedAgent};
 
 pub(super) async fn create_tournament(
     State(s): State<AppState>,
@@ -31,8 +22,7 @@ pub(super) async fn create_tournament(
 ) -> ApiResult<Response> {
     let caller = check_token(&s, &headers).await?;
     let Json(t) = body?;
-    let kind = Kind::parse(&t.kind)
-        .ok_or_else(|| ApiError::bad("kind", "kind must be round_robin or gauntlet"))?;
+    let kind = t.kind;
     if t.agents.len() < 2 || t.agents.len() > 64 {
         return Err(ApiError::bad("agents", "a tournament needs 2 to 64 agents"));
     }
@@ -74,7 +64,7 @@ pub(super) async fn create_tournament(
     }
     charge(&s, caller, Budget::Matches, pairs.len() as u32)?;
     let plan = db::TournamentPlan {
-        kind: kind.name(),
+        kind,
         agents: &agents,
         pairs: &pairs,
         rallies: t.rallies_per_match,
@@ -86,7 +76,7 @@ pub(super) async fn create_tournament(
     s.wake.notify_waiters();
     tracing::info!(
         id,
-        kind = kind.name(),
+        kind = kind.as_str(),
         matches = pairs.len(),
         "tournament queued"
     );
@@ -119,7 +109,7 @@ async fn tournament_view(s: &AppState, t: db::Tournament) -> ApiResult<wire::Tou
             .unwrap_or_else(|| format!("#{aid}"));
         agents.push((aid, name));
     }
-    let kind = Kind::parse(&t.kind).unwrap_or(Kind::RoundRobin);
+    let kind = t.kind;
     let matches = db::tournament_matches(&s.pool, id).await?;
     let view = tournament::view(kind, &agents, &matches);
     Ok(wire::TournamentView {
@@ -146,30 +136,30 @@ async fn tournament_view(s: &AppState, t: db::Tournament) -> ApiResult<wire::Tou
 pub(super) async fn get_tournament(
     State(s): State<AppState>,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<wire::TournamentView>> {
     let id = parse_id(&id, "id")?;
-    Ok(Json(json!(
-        tournament_view(&s, tournament_or_404(&s, id).await?).await?
-    )))
+    Ok(Json(
+        tournament_view(&s, tournament_or_404(&s, id).await?).await?,
+    ))
 }
 
 pub(super) async fn list_tournaments(
     State(s): State<AppState>,
-    Query(q): Query<HashMap<String, String>>,
-) -> ApiResult<Json<Value>> {
-    let limit = limit_only(&q)?;
+    Typed(q): Typed<wire::LimitQuery>,
+) -> ApiResult<Json<wire::TournamentList>> {
+    let limit = limit_of(q.limit, 100, 1000)?;
     let mut tournaments = Vec::new();
     for t in db::tournaments(&s.pool, limit).await? {
         tournaments.push(tournament_view(&s, t).await?.summary);
     }
-    Ok(Json(json!(wire::TournamentList { tournaments })))
+    Ok(Json(wire::TournamentList { tournaments }))
 }
 
 pub(super) async fn cancel_tournament(
     State(s): State<AppState>,
     headers: HeaderMap,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<wire::TournamentView>> {
     let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
     let t = tournament_or_404(&s, id).await?;
@@ -179,7 +169,7 @@ pub(super) async fn cancel_tournament(
             "tournament {id} has no queued or running match left"
         )));
     }
-    Ok(Json(json!(tournament_view(&s, t).await?)))
+    Ok(Json(tournament_view(&s, t).await?))
 }
 
 pub(super) async fn create_sprt(
@@ -294,26 +284,26 @@ async fn sprt_view(s: &AppState, id: i64) -> ApiResult<wire::SprtView> {
 pub(super) async fn get_sprt(
     State(s): State<AppState>,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<wire::SprtView>> {
     let id = parse_id(&id, "id")?;
-    Ok(Json(json!(sprt_view(&s, id).await?)))
+    Ok(Json(sprt_view(&s, id).await?))
 }
 
 pub(super) async fn list_sprts(
     State(s): State<AppState>,
-    Query(q): Query<HashMap<String, String>>,
-) -> ApiResult<Json<Value>> {
-    let limit = limit_only(&q)?;
-    Ok(Json(json!(wire::SprtList {
-        sprts: db::sprts(&s.pool, limit).await?
-    })))
+    Typed(q): Typed<wire::LimitQuery>,
+) -> ApiResult<Json<wire::SprtList>> {
+    let limit = limit_of(q.limit, 100, 1000)?;
+    Ok(Json(wire::SprtList {
+        sprts: db::sprts(&s.pool, limit).await?,
+    }))
 }
 
 pub(super) async fn cancel_sprt(
     State(s): State<AppState>,
     headers: HeaderMap,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<wire::SprtView>> {
     let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
     let t = db::sprt(&s.pool, id)
@@ -326,39 +316,38 @@ pub(super) async fn cancel_sprt(
             t.status
         )));
     }
-    Ok(Json(json!(sprt_view(&s, id).await?)))
+    Ok(Json(sprt_view(&s, id).await?))
 }
 
 pub(super) async fn get_rating_history(
     State(s): State<AppState>,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<wire::RatingHistory>> {
     let id = parse_id(&id, "id")?;
     let a = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
     let history = db::rating_history(&s.pool, id).await?;
-    Ok(Json(json!(wire::RatingHistory {
+    Ok(Json(wire::RatingHistory {
         agent_id: id,
         agent: a.name,
         system: "glicko2".into(),
         history,
-    })))
+    }))
 }
 
 pub(super) async fn get_agent_crossings(
     State(s): State<AppState>,
     Path(id): Path<String>,
-    Query(q): Query<HashMap<String, String>>,
-) -> ApiResult<Json<Value>> {
+    Typed(q): Typed<wire::LimitQuery>,
+) -> ApiResult<Json<wire::AgentCrossings>> {
     let id = parse_id(&id, "id")?;
-    only_params(&q, &["limit"])?;
-    let limit = limit_param(&q, 2000, 20_000)?;
+    let limit = limit_of(q.limit, 2000, 20_000)?;
     let a = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
     let (total, crossings) = db::agent_crossings(&s.pool, id, limit).await?;
-    Ok(Json(json!(wire::AgentCrossings {
+    Ok(Json(wire::AgentCrossings {
         agent_id: id,
         agent: a.name,
         serve_box: wire::ServeBox {
@@ -368,5 +357,5 @@ pub(super) async fn get_agent_crossings(
         },
         total,
         crossings,
-    })))
+    }))
 }

@@ -103,44 +103,43 @@ pub(super) async fn queue_match(
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, format!("/api/v1/matches/{id}"))],
-        Json(json!(m)),
+        Json(m),
     )
         .into_response())
 }
 
 pub(super) async fn list_matches(
     State(s): State<AppState>,
-    Query(q): Query<HashMap<String, String>>,
-) -> ApiResult<Json<Value>> {
-    only_params(&q, &["agent", "status", "limit", "before"])?;
-    let agent = q.get("agent").map(|a| parse_id(a, "agent")).transpose()?;
-    let before = q.get("before").map(|b| parse_id(b, "before")).transpose()?;
-    let status = q
-        .get("status")
-        .map(|st| st.parse::<db::MatchStatus>())
-        .transpose()
-        .map_err(|e| ApiError::bad("status", format!("status {e}")))?;
-    let limit = limit_param(&q, 100, 1000)?;
-    let filter = db::MatchFilter {
-        agent,
-        status,
-        before,
+    Typed(q): Typed<wire::MatchesQuery>,
+) -> ApiResult<Json<wire::MatchList>> {
+    let positive = |id: Option<i64>, what: &'static str| match id {
+        Some(id) if id <= 0 => Err(ApiError::bad(
+            what,
+            format!("{what} must be a positive id, not {id}"),
+        )),
+        _ => Ok(id),
     };
+    let filter = db::MatchFilter {
+        agent: positive(q.agent, "agent")?,
+        status: q.status,
+        before: positive(q.before, "before")?,
+    };
+    let limit = limit_of(q.limit, 100, 1000)?;
     let page = db::matches(&s.pool, filter, limit).await?;
     // A full page may have more behind it: `?before=` this id gets the next one.
     let next = (page.len() as i64 == limit)
         .then(|| page.last().map(|m| m.id))
         .flatten();
-    Ok(Json(json!(wire::MatchList {
+    Ok(Json(wire::MatchList {
         matches: page,
-        next_before: next
-    })))
+        next_before: next,
+    }))
 }
 
 pub(super) async fn get_match(
     State(s): State<AppState>,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<wire::MatchDetail>> {
     let id = parse_id(&id, "id")?;
     let m = db::match_row(&s.pool, id)
         .await?
@@ -158,19 +157,19 @@ pub(super) async fn get_match(
             drift: serde_json::from_str::<Value>(&d).unwrap_or(Value::Null),
         })
         .collect();
-    Ok(Json(json!(wire::MatchDetail {
+    Ok(Json(wire::MatchDetail {
         row: m,
         rally_log,
         drift,
         drift_by_side,
-    })))
+    }))
 }
 
 pub(super) async fn cancel_match(
     State(s): State<AppState>,
     headers: HeaderMap,
     Path(id): Path<String>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<db::Match>> {
     let caller = check_token(&s, &headers).await?;
     let id = parse_id(&id, "id")?;
     let m = db::match_row(&s.pool, id)
@@ -184,25 +183,24 @@ pub(super) async fn cancel_match(
         )));
     }
     s.publish_match(id, db::MatchStatus::Cancelled);
-    Ok(Json(json!(db::match_row(&s.pool, id).await?)))
+    let m = db::match_row(&s.pool, id)
+        .await?
+        .ok_or_else(|| anyhow::anyhow!("match {id} vanished after its cancellation"))?;
+    Ok(Json(m))
 }
 
 pub(super) async fn get_replay(
     State(s): State<AppState>,
     Path(id): Path<String>,
-    Query(q): Query<HashMap<String, String>>,
+    Typed(q): Typed<wire::ReplayQuery>,
 ) -> ApiResult<Response> {
     let id = parse_id(&id, "id")?;
     let m = db::match_row(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("match", id))?;
-    let rally = match q.get("rally") {
-        None => 0,
-        Some(r) => r
-            .parse::<i64>()
-            .ok()
-            .filter(|&r| r >= 0)
-            .ok_or_else(|| ApiError::bad("rally", format!("'{r}' is not a rally index")))?,
+    let rally = match q.rally.unwrap_or(0) {
+        r if r < 0 => return Err(ApiError::bad("rally", format!("{r} is not a rally index"))),
+        r => r,
     };
     if m.status != db::MatchStatus::Done {
         return Err(ApiError::new(

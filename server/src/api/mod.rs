@@ -1,12 +1,11 @@
 //! The REST API under `/api/v1` (JSON), the leaderboard page at `/`, and the error contract: every
 //! rejected request gets a 4xx with `{"error": {"code", "message", "field"}}` and writes nothing.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use axum::extract::multipart::MultipartError;
 use axum::extract::rejection::JsonRejection;
-use axum::extract::{DefaultBodyLimit, FromRequest, Multipart, Path, Query, Request, State};
+use axum::extract::{DefaultBodyLimit, FromRequest, Multipart, Path, Request, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
@@ -14,8 +13,9 @@ use axum::{Json, Router};
 use serde_json::{json, Value};
 
 use crate::db;
+use crate::ratings;
 use crate::state::{AppState, Budget};
-use crate::wire::{self, AgentRef};
+use wire::AgentRef;
 
 mod agents;
 mod contests;
@@ -39,7 +39,7 @@ pub struct ApiError {
     status: StatusCode,
     code: &'static str,
     message: String,
-    field: Option<&'static str>,
+    field: Option<std::borrow::Cow<'static, str>>,
     retry_after: Option<u64>,
 }
 
@@ -60,14 +60,14 @@ impl ApiError {
 
     fn bad(field: &'static str, message: impl Into<String>) -> ApiError {
         ApiError {
-            field: Some(field),
+            field: Some(field.into()),
             ..ApiError::new(StatusCode::BAD_REQUEST, "invalid_field", message)
         }
     }
 
     fn name_taken(what: &str, name: &str) -> ApiError {
         ApiError {
-            field: Some("name"),
+            field: Some("name".into()),
             ..ApiError::new(
                 StatusCode::CONFLICT,
                 "name_taken",
@@ -95,7 +95,7 @@ impl IntoResponse for ApiError {
             error: wire::ErrorDetail {
                 code: self.code.to_string(),
                 message: self.message,
-                field: self.field.map(str::to_string),
+                field: self.field.map(|f| f.into_owned()),
             },
         };
         let mut r = (self.status, Json(body)).into_response();
@@ -150,28 +150,50 @@ fn parse_id(raw: &str, what: &'static str) -> ApiResult<i64> {
         .ok_or_else(|| ApiError::bad(what, format!("'{raw}' is not a positive integer id")))
 }
 
-/// Refuses any query parameter not in `allowed`, naming the allowed ones.
-fn only_params(q: &HashMap<String, String>, allowed: &[&str]) -> ApiResult<()> {
-    match q.keys().find(|k| !allowed.contains(&k.as_str())) {
-        Some(k) => Err(ApiError::bad(
-            "query",
-            format!("unknown query parameter '{k}' ({})", allowed.join(", ")),
-        )),
-        None => Ok(()),
+/// A query string as `T` (one of `wire`'s queries): an unknown parameter or a value of the wrong
+/// kind is a 400 naming the parameter.
+struct Typed<T>(T);
+
+impl<S: Send + Sync, T: serde::de::DeserializeOwned> axum::extract::FromRequestParts<S>
+    for Typed<T>
+{
+    type Rejection = ApiError;
+
+    async fn from_request_parts(
+        parts: &mut axum::http::request::Parts,
+        _: &S,
+    ) -> Result<Typed<T>, ApiError> {
+        let raw = parts.uri.query().unwrap_or("");
+        let de = serde_urlencoded::Deserializer::new(form_urlencoded::parse(raw.as_bytes()));
+        serde_path_to_error::deserialize(de)
+            .map(Typed)
+            .map_err(|e| {
+                let path = e.path().to_string();
+                let message = match path.as_str() {
+                    "." => format!("query: {}", e.inner()),
+                    p => format!("query parameter '{p}': {}", e.inner()),
+                };
+                ApiError {
+                    field: Some(if path == "." {
+                        "query".into()
+                    } else {
+                        path.into()
+                    }),
+                    ..ApiError::new(StatusCode::BAD_REQUEST, "invalid_field", message)
+                }
+            })
     }
 }
 
-/// `?limit=`: an integer from 1 to `max`, `default` when absent.
-fn limit_param(q: &HashMap<String, String>, default: i64, max: i64) -> ApiResult<i64> {
-    match q.get("limit") {
+/// `?limit=`: from 1 to `max`, `default` when absent.
+fn limit_of(limit: Option<i64>, default: i64, max: i64) -> ApiResult<i64> {
+    match limit {
         None => Ok(default),
-        Some(l) => l
-            .parse::<i64>()
-            .ok()
-            .filter(|l| (1..=max).contains(l))
-            .ok_or_else(|| {
-                ApiError::bad("limit", format!("limit must be an integer from 1 to {max}"))
-            }),
+        Some(l) if (1..=max).contains(&l) => Ok(l),
+        Some(l) => Err(ApiError::bad(
+            "limit",
+            format!("limit must be an integer from 1 to {max}, not {l}"),
+        )),
     }
 }
 
@@ -277,9 +299,9 @@ async fn method_not_allowed(method: axum::http::Method) -> ApiError {
     )
 }
 
-async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {
+async fn healthz(State(s): State<AppState>) -> ApiResult<Json<wire::Health>> {
     db::ping(&s.pool).await?;
-    Ok(Json(json!(wire::Health {
+    Ok(Json(wire::Health {
         status: "ok".into(),
         sim_version: sim::SIM_VERSION.into(),
         qualification: Some(wire::QualificationRule {
@@ -287,7 +309,7 @@ async fn healthz(State(s): State<AppState>) -> ApiResult<Json<Value>> {
             min_hit_rate: s.settings.qualification_min_hit_rate,
             max_dropped: s.settings.qualification_max_dropped,
         }),
-    })))
+    }))
 }
 
 /// `GET /events`: server-sent events, one JSON `ServerEvent` per change (matches queued, started,
@@ -447,7 +469,7 @@ fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()>
     };
     let limited = |message: String, secs: u64| ApiError {
         retry_after: Some(secs),
-        field: Some("rate"),
+        field: Some("rate".into()),
         ..ApiError::new(StatusCode::TOO_MANY_REQUESTS, "rate_limited", message)
     };
     if n > limit {
@@ -524,7 +546,7 @@ async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiRes
         AgentRef::Name(name) => db::agent_by_name(&s.pool, name).await?,
     };
     let agent = found.ok_or_else(|| ApiError {
-        field: Some(field),
+        field: Some(field.into()),
         ..match r {
             AgentRef::Id(id) => ApiError::not_found("agent", *id),
             AgentRef::Name(name) => ApiError::new(
@@ -536,7 +558,7 @@ async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiRes
     })?;
     match &agent.retired_at {
         Some(when) => Err(ApiError {
-            field: Some(field),
+            field: Some(field.into()),
             ..ApiError::new(
                 StatusCode::CONFLICT,
                 "retired",
@@ -566,8 +588,8 @@ fn seed_or_clock(seed: Option<u64>) -> ApiResult<u64> {
     }))
 }
 
-async fn leaderboard(State(s): State<AppState>) -> ApiResult<Json<Value>> {
-    Ok(Json(json!(*crate::board::current_board(&s).await?)))
+async fn leaderboard(State(s): State<AppState>) -> ApiResult<Json<ratings::Leaderboard>> {
+    Ok(Json((*crate::board::current_board(&s).await?).clone()))
 }
 
 async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {

@@ -30,12 +30,12 @@ pub(super) async fn issue_token(
     };
     Ok((
         StatusCode::CREATED,
-        Json(json!(wire::IssuedToken {
+        Json(wire::IssuedToken {
             id,
             name: body.name,
             token,
             note: "shown once: only its SHA-256 is stored".into(),
-        })),
+        }),
     )
         .into_response())
 }

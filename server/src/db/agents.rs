@@ -17,60 +17,34 @@ pub async fn register_builtins(pool: &Pool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// An agent row.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct Agent {
-    /// Id.
-    pub id: i64,
-    /// Unique name.
-    pub name: String,
-    /// What it is.
-    pub kind: AgentKind,
-    /// Hash of its spec.
-    pub spec_hash: String,
-    /// Registered by the server itself.
-    #[sqlx(try_from = "super::Flag")]
-    pub builtin: bool,
-    /// When registered.
-    pub created_at: String,
-    /// Qualification episodes played.
-    pub qual_episodes: Option<i64>,
-    /// Qualification hit rate.
-    pub hit_rate: Option<f64>,
-    /// Qualification success rate.
-    pub success_rate: Option<f64>,
-    /// Qualification effort.
-    pub effort: Option<f64>,
-    /// When its owner or the admin retired it (UTC); none while it plays.
-    #[serde(default)]
-    pub retired_at: Option<String>,
-}
-
 pub(super) const AGENT_COLUMNS: &str = "id, name, kind, spec_hash, builtin, created_at, qual_episodes, hit_rate, success_rate, effort, retired_at";
 
 /// All agents.
 pub async fn agents(pool: &Pool) -> sqlx::Result<Vec<Agent>> {
-    sqlx::query_as(&format!("SELECT {AGENT_COLUMNS} FROM agents ORDER BY id"))
+    sqlx::query_as::<_, Row<Agent>>(&format!("SELECT {AGENT_COLUMNS} FROM agents ORDER BY id"))
         .fetch_all(pool)
         .await
+        .map(rows)
 }
 
 /// One agent.
 pub async fn agent(pool: &Pool, id: i64) -> sqlx::Result<Option<Agent>> {
-    sqlx::query_as(&format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = $1"))
+    sqlx::query_as::<_, Row<Agent>>(&format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = $1"))
         .bind(id)
         .fetch_optional(pool)
         .await
+        .map(row)
 }
 
 /// The agent with a name, in any case (names are unique regardless of case).
 pub async fn agent_by_name(pool: &Pool, name: &str) -> sqlx::Result<Option<Agent>> {
-    sqlx::query_as(&format!(
+    sqlx::query_as::<_, Row<Agent>>(&format!(
         "SELECT {AGENT_COLUMNS} FROM agents WHERE lower(name) = lower($1)"
     ))
     .bind(name)
     .fetch_optional(pool)
     .await
+    .map(row)
 }
 
 /// The token an agent was submitted with (none: built in, or submitted with the admin token).
@@ -95,10 +69,14 @@ pub async fn retire_agent(pool: &Pool, id: i64) -> sqlx::Result<bool> {
 
 /// An agent's kind and spec (for playing it).
 pub async fn agent_spec(pool: &Pool, id: i64) -> sqlx::Result<Option<(AgentKind, String)>> {
-    sqlx::query_as("SELECT kind, spec FROM agents WHERE id = $1")
-        .bind(id)
-        .fetch_optional(pool)
-        .await
+    let found: Option<(String, String)> =
+        sqlx::query_as("SELECT kind, spec FROM agents WHERE id = $1")
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+    found
+        .map(|(kind, spec)| Ok((word(&kind, "kind")?, spec)))
+        .transpose()
 }
 
 /// Inserts a checkpoint agent (submitted, or built in) with its qualification.

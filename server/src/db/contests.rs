@@ -3,32 +3,11 @@
 
 use super::*;
 
-/// A tournament row.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct Tournament {
-    /// Id.
-    pub id: i64,
-    /// round_robin | gauntlet.
-    pub kind: String,
-    /// Agent ids (JSON array) in the order given.
-    pub agents_json: String,
-    /// Rallies per match.
-    pub rallies_per_match: i64,
-    /// Rounds.
-    pub rounds: i64,
-    /// Seed of its first match (the k-th gets seed + k).
-    pub seed: i64,
-    /// The submitter token that created it (null: the admin).
-    pub created_by: Option<i64>,
-    /// When created.
-    pub created_at: String,
-}
-
 /// A tournament to create: its agents and the (side A, side B) index pairs of its matches.
 #[derive(Debug, Clone, Copy)]
 pub struct TournamentPlan<'a> {
-    /// round_robin | gauntlet.
-    pub kind: &'a str,
+    /// Round robin or gauntlet.
+    pub kind: wire::TournamentKind,
     /// The agents in the order given.
     pub agents: &'a [Agent],
     /// Its matches, indices into `agents`.
@@ -57,7 +36,7 @@ pub async fn create_tournament(pool: &Pool, plan: TournamentPlan<'_>) -> sqlx::R
     let mut tx = pool.begin().await?;
     let ids: Vec<i64> = agents.iter().map(|a| a.id).collect();
     let t: i64 = sqlx::query_scalar("INSERT INTO tournaments (kind, agents_json, rallies_per_match, rounds, seed, created_by) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
-        .bind(kind)
+        .bind(kind.as_str())
         .bind(serde_json::to_string(&ids).unwrap_or_default())
         .bind(rallies as i64)
         .bind(rounds as i64)
@@ -83,29 +62,32 @@ pub async fn create_tournament(pool: &Pool, plan: TournamentPlan<'_>) -> sqlx::R
 
 /// One tournament.
 pub async fn tournament(pool: &Pool, id: i64) -> sqlx::Result<Option<Tournament>> {
-    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments WHERE id = $1")
+    sqlx::query_as::<_, Row<Tournament>>("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await
+        .map(row)
 }
 
 /// Tournaments, newest first.
 pub async fn tournaments(pool: &Pool, limit: i64) -> sqlx::Result<Vec<Tournament>> {
-    sqlx::query_as("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments ORDER BY id DESC LIMIT $1")
+    sqlx::query_as::<_, Row<Tournament>>("SELECT id, kind, agents_json, rallies_per_match, rounds, seed, created_by, created_at FROM tournaments ORDER BY id DESC LIMIT $1")
         .bind(limit)
         .fetch_all(pool)
         .await
+        .map(rows)
 }
 
 /// A tournament's matches in the order they were queued.
 pub async fn tournament_matches(pool: &Pool, id: i64) -> sqlx::Result<Vec<Match>> {
-    sqlx::query_as(&format!(
+    sqlx::query_as::<_, Row<Match>>(&format!(
         "SELECT {cols} FROM matches WHERE tournament_id = $1 ORDER BY id",
         cols = match_columns()
     ))
     .bind(id)
     .fetch_all(pool)
     .await
+    .map(rows)
 }
 
 /// Cancels a tournament's queued and running matches; how many.
@@ -116,43 +98,6 @@ pub async fn cancel_tournament(pool: &Pool, id: i64) -> sqlx::Result<u64> {
         .execute(pool)
         .await?;
     Ok(r.rows_affected())
-}
-
-/// An SPRT row.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct Sprt {
-    /// Id.
-    pub id: i64,
-    /// The agent tested.
-    pub agent_a: i64,
-    /// Its opponent.
-    pub agent_b: i64,
-    /// H0: A's Elo advantage on points is elo0.
-    pub elo0: f64,
-    /// H1: it is elo1.
-    pub elo1: f64,
-    /// False-positive rate.
-    pub alpha: f64,
-    /// False-negative rate.
-    pub beta: f64,
-    /// Rallies per match.
-    pub rallies_per_match: i64,
-    /// Matches after which it stops undecided.
-    pub max_matches: i64,
-    /// Seed of the first match (the k-th gets seed + k).
-    pub seed: i64,
-    /// Where it is in its life.
-    pub status: SprtStatus,
-    /// Log-likelihood ratio after the finished matches.
-    pub llr: f64,
-    /// Finished matches.
-    pub matches_done: i64,
-    /// The submitter token that created it (null: the admin).
-    pub created_by: Option<i64>,
-    /// When created.
-    pub created_at: String,
-    /// When it ended.
-    pub finished_at: Option<String>,
 }
 
 const SPRT_COLUMNS: &str = "id, agent_a, agent_b, elo0, elo1, alpha, beta, rallies_per_match, max_matches, seed, status, llr, matches_done, created_by, created_at, finished_at";
@@ -210,31 +155,34 @@ pub async fn create_sprt(
 
 /// One SPRT.
 pub async fn sprt(pool: &Pool, id: i64) -> sqlx::Result<Option<Sprt>> {
-    sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
+    sqlx::query_as::<_, Row<Sprt>>(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
         .bind(id)
         .fetch_optional(pool)
         .await
+        .map(row)
 }
 
 /// SPRTs, newest first.
 pub async fn sprts(pool: &Pool, limit: i64) -> sqlx::Result<Vec<Sprt>> {
-    sqlx::query_as(&format!(
+    sqlx::query_as::<_, Row<Sprt>>(&format!(
         "SELECT {SPRT_COLUMNS} FROM sprts ORDER BY id DESC LIMIT $1"
     ))
     .bind(limit)
     .fetch_all(pool)
     .await
+    .map(rows)
 }
 
 /// An SPRT's matches in order.
 pub async fn sprt_matches(pool: &Pool, id: i64) -> sqlx::Result<Vec<Match>> {
-    sqlx::query_as(&format!(
+    sqlx::query_as::<_, Row<Match>>(&format!(
         "SELECT {cols} FROM matches WHERE sprt_id = $1 ORDER BY id",
         cols = match_columns()
     ))
     .bind(id)
     .fetch_all(pool)
     .await
+    .map(rows)
 }
 
 /// Ends a running SPRT with `status` and cancels its unfinished matches; false if it had ended.
@@ -246,7 +194,7 @@ pub async fn end_sprt(
     let r = sqlx::query(
         "UPDATE sprts SET status = $1, finished_at = $3 WHERE id = $2 AND status = 'running'",
     )
-    .bind(status)
+    .bind(status.as_str())
     .bind(id)
     .bind(crate::db::now_text())
     .execute(&mut *conn)
@@ -273,10 +221,11 @@ pub async fn cancel_sprt(pool: &Pool, id: i64) -> sqlx::Result<bool> {
 /// matches keep no replay frames (the replay endpoint re-simulates a rally on request).
 pub(super) async fn sprt_step(conn: &mut sqlx::AnyConnection, id: i64) -> sqlx::Result<()> {
     let s: Option<Sprt> =
-        sqlx::query_as(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
+        sqlx::query_as::<_, Row<Sprt>>(&format!("SELECT {SPRT_COLUMNS} FROM sprts WHERE id = $1"))
             .bind(id)
             .fetch_optional(&mut *conn)
-            .await?;
+            .await
+            .map(row)?;
     let Some(s) = s.filter(|s| s.status == SprtStatus::Running) else {
         return Ok(());
     };
@@ -299,8 +248,8 @@ pub(super) async fn sprt_step(conn: &mut sqlx::AnyConnection, id: i64) -> sqlx::
     sqlx::query("UPDATE sprts SET llr = $1, matches_done = $2, status = $3, finished_at = CASE WHEN $4 = 'running' THEN NULL ELSE $6 END WHERE id = $5")
         .bind(step.llr)
         .bind(step.matches_done as i64)
-        .bind(step.status)
-        .bind(step.status)
+        .bind(step.status.as_str())
+        .bind(step.status.as_str())
         .bind(id)
         .bind(crate::db::now_text())
         .execute(&mut *conn)
@@ -309,9 +258,9 @@ pub(super) async fn sprt_step(conn: &mut sqlx::AnyConnection, id: i64) -> sqlx::
         return Ok(());
     };
     let sql = format!("SELECT {AGENT_COLUMNS} FROM agents WHERE id = $1");
-    let agent = |id: i64| sqlx::query_as::<_, Agent>(&sql).bind(id);
-    let a = agent(next.a).fetch_one(&mut *conn).await?;
-    let b = agent(next.b).fetch_one(&mut *conn).await?;
+    let agent = |id: i64| sqlx::query_as::<_, Row<Agent>>(&sql).bind(id);
+    let a = agent(next.a).fetch_one(&mut *conn).await?.0;
+    let b = agent(next.b).fetch_one(&mut *conn).await?.0;
     let origin = Origin {
         tournament: None,
         sprt: Some(id),

@@ -3,70 +3,6 @@
 
 use super::*;
 
-/// A match row.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct Match {
-    /// Id.
-    pub id: i64,
-    /// Agent on side A.
-    pub agent_a: i64,
-    /// Agent on side B.
-    pub agent_b: i64,
-    /// Rallies.
-    pub rallies: i64,
-    /// Seed.
-    pub seed: i64,
-    /// Arena preset.
-    pub preset: String,
-    /// Simulator version.
-    pub sim_version: String,
-    /// Played (or queued) under another simulator version than this server's: its result stands,
-    /// but it cannot be re-simulated or played here.
-    #[sqlx(try_from = "super::Flag")]
-    pub outdated: bool,
-    /// Hash of A's spec when queued.
-    pub spec_hash_a: String,
-    /// Hash of B's spec when queued.
-    pub spec_hash_b: String,
-    /// Replay frames are stored.
-    #[sqlx(try_from = "super::Flag")]
-    pub keep_replay: bool,
-    /// Where it is in its life.
-    pub status: MatchStatus,
-    /// When queued.
-    pub created_at: String,
-    /// When a worker took it.
-    pub started_at: Option<String>,
-    /// When it finished.
-    pub finished_at: Option<String>,
-    /// Points of A.
-    pub points_a: Option<i64>,
-    /// Points of B.
-    pub points_b: Option<i64>,
-    /// Mean rally length.
-    pub mean_rally_length: Option<f64>,
-    /// Longest rally.
-    pub max_rally_length: Option<i64>,
-    /// Fraction of crossings in the serve box.
-    pub in_box_fraction: Option<f64>,
-    /// Serve → return energy distance.
-    pub energy_distance: Option<f64>,
-    /// Drift slope.
-    pub drift_slope: Option<f64>,
-    /// Why it failed.
-    pub error: Option<String>,
-    /// The tournament it belongs to.
-    pub tournament_id: Option<i64>,
-    /// The SPRT it belongs to.
-    pub sprt_id: Option<i64>,
-    /// The submitter token that queued it (null: the admin or the server).
-    pub created_by: Option<i64>,
-    /// The worker that holds its lease (running) or played it (done, failed).
-    pub worker: Option<String>,
-    /// How many times a worker claimed it (more than once: a worker died or lost its lease).
-    pub attempts: i64,
-}
-
 /// The columns of a [`Match`]; `outdated` compares the stored simulator version with this build's
 /// (a constant of ours, digits and dots only).
 pub(super) fn match_columns() -> String {
@@ -76,40 +12,38 @@ pub(super) fn match_columns() -> String {
     )
 }
 
+/// A queued match row for tests (nothing played, no tournament or SPRT).
 #[cfg(test)]
-impl Match {
-    /// A queued match row for tests (nothing played, no tournament or SPRT).
-    pub(crate) fn example(id: i64, agent_a: i64, agent_b: i64) -> Match {
-        Match {
-            id,
-            agent_a,
-            agent_b,
-            rallies: 10,
-            seed: id,
-            preset: "myochallenge".into(),
-            sim_version: String::new(),
-            outdated: false,
-            spec_hash_a: String::new(),
-            spec_hash_b: String::new(),
-            keep_replay: true,
-            status: MatchStatus::Queued,
-            created_at: String::new(),
-            started_at: None,
-            finished_at: None,
-            points_a: None,
-            points_b: None,
-            mean_rally_length: None,
-            max_rally_length: None,
-            in_box_fraction: None,
-            energy_distance: None,
-            drift_slope: None,
-            error: None,
-            tournament_id: None,
-            sprt_id: None,
-            created_by: None,
-            worker: None,
-            attempts: 0,
-        }
+pub(crate) fn example_match(id: i64, agent_a: i64, agent_b: i64) -> Match {
+    Match {
+        id,
+        agent_a,
+        agent_b,
+        rallies: 10,
+        seed: id,
+        preset: "myochallenge".into(),
+        sim_version: String::new(),
+        outdated: false,
+        spec_hash_a: String::new(),
+        spec_hash_b: String::new(),
+        keep_replay: true,
+        status: MatchStatus::Queued,
+        created_at: String::new(),
+        started_at: None,
+        finished_at: None,
+        points_a: None,
+        points_b: None,
+        mean_rally_length: None,
+        max_rally_length: None,
+        in_box_fraction: None,
+        energy_distance: None,
+        drift_slope: None,
+        error: None,
+        tournament_id: None,
+        sprt_id: None,
+        created_by: None,
+        worker: None,
+        attempts: 0,
     }
 }
 
@@ -155,13 +89,14 @@ pub async fn queue_match<'c, E: sqlx::AnyExecutor<'c>>(
 
 /// One match.
 pub async fn match_row(pool: &Pool, id: i64) -> sqlx::Result<Option<Match>> {
-    sqlx::query_as(&format!(
+    sqlx::query_as::<_, Row<Match>>(&format!(
         "SELECT {} FROM matches WHERE id = $1",
         match_columns()
     ))
     .bind(id)
     .fetch_optional(pool)
     .await
+    .map(row)
 }
 
 /// Which matches to list.
@@ -177,16 +112,17 @@ pub struct MatchFilter {
 
 /// Matches, newest first, filtered.
 pub async fn matches(pool: &Pool, filter: MatchFilter, limit: i64) -> sqlx::Result<Vec<Match>> {
-    sqlx::query_as(&format!(
+    sqlx::query_as::<_, Row<Match>>(&format!(
         "SELECT {cols} FROM matches WHERE ($1 IS NULL OR agent_a = $1 OR agent_b = $1) AND ($2 IS NULL OR status = $2) AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4",
         cols = match_columns()
     ))
     .bind(filter.agent)
-    .bind(filter.status)
+    .bind(filter.status.map(MatchStatus::as_str))
     .bind(filter.before)
     .bind(limit)
     .fetch_all(pool)
     .await
+    .map(rows)
 }
 
 /// What became of a result a worker stored.
@@ -335,14 +271,16 @@ pub async fn store_result(
 
 /// Why a worker's write under its lease matched no row: the match was cancelled, or the lease lost.
 async fn lost_or_cancelled(pool: &Pool, id: i64) -> sqlx::Result<Stored> {
-    let status: Option<(MatchStatus,)> = sqlx::query_as("SELECT status FROM matches WHERE id = $1")
+    let status: Option<String> = sqlx::query_scalar("SELECT status FROM matches WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await?;
-    Ok(match status {
-        Some((MatchStatus::Cancelled,)) => Stored::Cancelled,
-        _ => Stored::LeaseLost,
-    })
+    Ok(
+        match status.as_deref().map(|s| word(s, "status")).transpose()? {
+            Some(MatchStatus::Cancelled) => Stored::Cancelled,
+            _ => Stored::LeaseLost,
+        },
+    )
 }
 
 /// Marks a running match failed with a reason, under the worker's current lease; an SPRT it belonged
@@ -385,29 +323,13 @@ pub async fn cancel(pool: &Pool, id: i64) -> sqlx::Result<bool> {
     Ok(r.is_some())
 }
 
-/// A stored rally.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct Rally {
-    /// Index in the match.
-    pub idx: i64,
-    /// Who served.
-    pub server: String,
-    /// Legal returns.
-    pub length: i64,
-    /// End reason.
-    pub end_reason: String,
-    /// Who failed.
-    pub failing_side: Option<String>,
-    /// Simulated duration, s.
-    pub duration: f64,
-}
-
 /// A match's rallies.
 pub async fn rallies(pool: &Pool, id: i64) -> sqlx::Result<Vec<Rally>> {
-    sqlx::query_as("SELECT idx, server, length, end_reason, failing_side, duration FROM rallies WHERE match_id = $1 ORDER BY idx")
+    sqlx::query_as::<_, Row<Rally>>("SELECT idx, server, length, end_reason, failing_side, duration FROM rallies WHERE match_id = $1 ORDER BY idx")
         .bind(id)
         .fetch_all(pool)
         .await
+        .map(rows)
 }
 
 /// A rally's replay frames (JSON), if stored.

@@ -17,16 +17,20 @@ use std::str::FromStr;
 
 use serde::Serialize;
 use sqlx::any::{AnyPoolOptions, AnyTypeInfo};
-use sqlx::{Any, Decode, Executor, FromRow, Type};
+use sqlx::{Any, Decode, Executor, Type};
 
 use ::agents::matchrun::MatchRecord;
 
-pub use crate::domain::{AgentKind, MatchStatus, SprtStatus, WorkerStatus};
+pub use wire::{
+    Agent, AgentCrossing, AgentDrift, AgentKind, Match, MatchStatus, Rally, RatingPoint, Sprt,
+    SprtStatus, Tournament, WorkerStatus,
+};
 
 mod agents;
 mod contests;
 mod counts;
 mod matches;
+mod rows;
 mod stats;
 mod tokens;
 pub mod workers;
@@ -35,6 +39,7 @@ pub use agents::*;
 pub use contests::*;
 pub use counts::*;
 pub use matches::*;
+use rows::{row, rows, Row};
 pub use stats::*;
 pub use tokens::*;
 pub use workers::Lease;
@@ -281,6 +286,15 @@ impl<'r> Decode<'r, Any> for Flag {
             Err(_) => <bool as Decode<Any>>::decode(value).map(Flag),
         }
     }
+}
+
+/// A stored word (a status, a kind) read back; a word the API does not know is a decoding error
+/// naming the column.
+pub(crate) fn word<W: FromStr<Err = String>>(text: &str, column: &str) -> sqlx::Result<W> {
+    text.parse().map_err(|e: String| sqlx::Error::ColumnDecode {
+        index: column.to_string(),
+        source: format!("'{text}': {e}").into(),
+    })
 }
 
 /// The SHA-256 of `text`, as 64 lowercase hex digits.

@@ -47,25 +47,10 @@ pub async fn agent_drift(pool: &Pool) -> sqlx::Result<Vec<(i64, Option<f64>, Opt
         .await
 }
 
-/// An agent's drift over its finished matches (its side's serves and returns, `match_drift`).
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct AgentDrift {
-    /// Matches with drift statistics.
-    pub matches: i64,
-    /// Crossings counted over them.
-    pub crossings: i64,
-    /// Fraction of those crossings inside the serve box (pooled over matches).
-    pub in_box_fraction: Option<f64>,
-    /// Mean serve → return energy distance (matches that have one).
-    pub energy_distance: Option<f64>,
-    /// Mean drift slope over exchange index (matches that have one).
-    pub drift_slope: Option<f64>,
-}
-
 /// The drift summary of one agent (PostgreSQL sums integers as NUMERIC, which sqlx's Any driver
 /// does not read: the sums are cast).
 pub async fn agent_drift_summary(pool: &Pool, agent: i64) -> sqlx::Result<AgentDrift> {
-    sqlx::query_as(
+    sqlx::query_as::<_, Row<AgentDrift>>(
         "SELECT COUNT(*) AS matches, CAST(COALESCE(SUM(crossings), 0) AS BIGINT) AS crossings, \
          SUM(in_box_fraction * crossings) / NULLIF(CAST(SUM(crossings) AS DOUBLE PRECISION), 0) AS in_box_fraction, \
          AVG(energy_distance) AS energy_distance, AVG(drift_slope) AS drift_slope \
@@ -74,6 +59,7 @@ pub async fn agent_drift_summary(pool: &Pool, agent: i64) -> sqlx::Result<AgentD
     .bind(agent)
     .fetch_one(pool)
     .await
+    .map(|r| r.0)
 }
 
 /// How many of the rallies of an agent's finished matches had each length: `(length, rallies)`,
@@ -87,27 +73,6 @@ pub async fn agent_rally_lengths(pool: &Pool, agent: i64) -> sqlx::Result<Vec<(i
     .bind(agent)
     .fetch_all(pool)
     .await
-}
-
-/// A crossing of the hitting plane that an agent is answerable for.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct AgentCrossing {
-    /// The match.
-    pub match_id: i64,
-    /// The rally in it.
-    pub rally: i64,
-    /// 0 for a serve, k for the k-th return of the rally.
-    pub exchange: i64,
-    /// Lateral coordinate in the receiver's frame, m.
-    pub y_r: f64,
-    /// Height, m.
-    pub z: f64,
-    /// Inside the serve box.
-    #[sqlx(try_from = "super::Flag")]
-    pub in_box: bool,
-    /// Extrapolated (the receiver hit before the plane).
-    #[sqlx(try_from = "super::Flag")]
-    pub extrapolated: bool,
 }
 
 /// The crossings an agent is answerable for in its finished matches, newest match first: every
@@ -125,7 +90,7 @@ pub async fn agent_crossings(
         .bind(agent)
         .fetch_one(pool)
         .await?;
-    let rows = sqlx::query_as(&format!(
+    let found = sqlx::query_as::<_, Row<AgentCrossing>>(&format!(
         "SELECT c.match_id AS match_id, c.rally_idx AS rally, c.exchange AS exchange, c.y_r AS y_r, c.z AS z, \
          c.in_box AS in_box, c.extrapolated AS extrapolated {MINE} \
          ORDER BY c.match_id DESC, c.rally_idx, c.seq LIMIT $2"
@@ -134,32 +99,16 @@ pub async fn agent_crossings(
     .bind(limit)
     .fetch_all(pool)
     .await?;
-    Ok((total, rows))
-}
-
-/// One point of an agent's rating history.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct RatingPoint {
-    /// Order in which matches finished (server-wide).
-    pub seq: i64,
-    /// The match after which it was computed.
-    pub match_id: i64,
-    /// Glicko-2 rating.
-    pub rating: f64,
-    /// Its deviation.
-    pub deviation: f64,
-    /// Its volatility.
-    pub volatility: f64,
-    /// When.
-    pub created_at: String,
+    Ok((total, rows(found)))
 }
 
 /// An agent's rating history, oldest first.
 pub async fn rating_history(pool: &Pool, agent: i64) -> sqlx::Result<Vec<RatingPoint>> {
-    sqlx::query_as("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = $1 ORDER BY seq")
+    sqlx::query_as::<_, Row<RatingPoint>>("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = $1 ORDER BY seq")
         .bind(agent)
         .fetch_all(pool)
         .await
+        .map(rows)
 }
 
 /// The drift statistics of one side of a match: (side, agent, JSON).

@@ -8,9 +8,8 @@
 //! refused, and no match is ever stored twice. Times are Unix milliseconds from the processes'
 //! clocks: workers on several machines need clocks that agree to well within a lease.
 
-use super::Pool;
-use serde::Serialize;
-use sqlx::FromRow;
+use super::{rows, Pool, Row};
+pub use wire::Worker;
 
 /// Now, in Unix milliseconds.
 pub fn now_ms() -> i64 {
@@ -29,28 +28,6 @@ pub struct Lease {
     pub worker: String,
     /// The claim's number.
     pub attempt: i64,
-}
-
-/// A worker as `GET /api/v1/workers` shows it.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, FromRow)]
-pub struct Worker {
-    /// Its name (unique; `HOST:PID` unless given).
-    pub name: String,
-    /// The machine it runs on.
-    pub host: String,
-    /// Its process id there.
-    pub pid: i64,
-    /// Matches it plays at once.
-    pub slots: i64,
-    /// When it started, Unix ms.
-    pub started_ms: i64,
-    /// Its last heartbeat, Unix ms.
-    pub heartbeat_ms: i64,
-    /// Matches it stored.
-    pub matches_played: i64,
-    /// Running, or stopped by itself (after SIGTERM); a worker that died stays running with an old
-    /// heartbeat.
-    pub status: super::WorkerStatus,
 }
 
 /// Queues again every running match whose lease ran out before `now` (its worker died, hung or lost
@@ -203,9 +180,10 @@ pub async fn stopped(pool: &Pool, name: &str) -> sqlx::Result<()> {
 
 /// Every worker that ever registered, the most recent heartbeat first.
 pub async fn workers(pool: &Pool) -> sqlx::Result<Vec<Worker>> {
-    sqlx::query_as("SELECT name, host, pid, slots, started_ms, heartbeat_ms, matches_played, status FROM workers ORDER BY heartbeat_ms DESC, name")
+    sqlx::query_as::<_, Row<Worker>>("SELECT name, host, pid, slots, started_ms, heartbeat_ms, matches_played, status FROM workers ORDER BY heartbeat_ms DESC, name")
         .fetch_all(pool)
         .await
+        .map(rows)
 }
 
 /// The running matches (id and lease holder).
@@ -222,13 +200,17 @@ pub async fn watched(
     pool: &Pool,
     after: i64,
 ) -> sqlx::Result<Vec<(i64, crate::domain::MatchStatus, Option<String>)>> {
-    sqlx::query_as(
+    let found: Vec<(i64, String, Option<String>)> = sqlx::query_as(
         "SELECT id, status, worker FROM matches \
          WHERE status IN ('queued', 'running') OR id > $1 ORDER BY id",
     )
     .bind(after)
     .fetch_all(pool)
-    .await
+    .await?;
+    found
+        .into_iter()
+        .map(|(id, status, worker)| Ok((id, super::word(&status, "status")?, worker)))
+        .collect()
 }
 
 /// The highest match id so far (0 when there is none).
@@ -243,10 +225,14 @@ pub async fn status_of(
     pool: &Pool,
     id: i64,
 ) -> sqlx::Result<Option<(crate::domain::MatchStatus, Option<String>)>> {
-    sqlx::query_as("SELECT status, worker FROM matches WHERE id = $1")
-        .bind(id)
-        .fetch_optional(pool)
-        .await
+    let found: Option<(String, Option<String>)> =
+        sqlx::query_as("SELECT status, worker FROM matches WHERE id = $1")
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+    found
+        .map(|(status, worker)| Ok((super::word(&status, "status")?, worker)))
+        .transpose()
 }
 
 #[cfg(test)]

@@ -271,7 +271,7 @@ pub fn run(args: &BatchArgs) -> Result<(), CliError> {
                 label,
             } => {
                 let q = wire::NewTournament {
-                    kind: kind.clone(),
+                    kind: *kind,
                     agents: agents.iter().map(|&id| id.into()).collect(),
                     rallies_per_match: *rallies_per_match,
                     rounds: *rounds,

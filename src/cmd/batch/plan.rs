@@ -2,7 +2,7 @@
 //!
 //! Parsing and checking only: no I/O, nothing but serde and toml, so that the fuzz target
 //! `fuzz/fuzz_targets/batch_plan.rs` compiles this very file (`#[path]`) without the CLI. The jobs
-//! are plain data; `rally batch` turns them into the server's request types (`server::wire`).
+//! are plain data; `rally batch` turns them into the server's request types (the `wire` crate).
 
 use std::collections::HashMap;
 
@@ -96,7 +96,7 @@ pub enum Job {
         seed: u64,
     },
     Tournament {
-        kind: String,
+        kind: wire::TournamentKind,
         agents: Vec<i64>,
         rallies_per_match: u32,
         rounds: u32,
@@ -166,12 +166,10 @@ pub fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<V
     }
     for (i, t) in plan.tournaments.iter().enumerate() {
         let at = format!("tournament {}", i + 1);
-        if t.kind != "round_robin" && t.kind != "gauntlet" {
-            return Err(format!(
-                "{at}: kind must be round_robin or gauntlet, not '{}'",
-                t.kind
-            ));
-        }
+        let kind: wire::TournamentKind = t
+            .kind
+            .parse()
+            .map_err(|e| format!("{at}: kind {e}, not '{}'", t.kind))?;
         let agents: Vec<i64> = t
             .agents
             .iter()
@@ -180,7 +178,7 @@ pub fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<V
         let seed = t.seed.unwrap_or(plan.seed.wrapping_add(k)) & (i64::MAX as u64);
         out.push(Job::Tournament {
             label: format!("{}, {} agents", t.kind, agents.len()),
-            kind: t.kind.clone(),
+            kind,
             agents,
             rallies_per_match: t.rallies_per_match.unwrap_or(plan.rallies),
             rounds: t.rounds,

@@ -196,34 +196,30 @@ fn matches_per_hour(addr: &str, agents: [&str; 3]) -> anyhow::Result<(f64, f64)>
     let t0 = Instant::now();
     let mut ids = Vec::new();
     for k in 0..12 {
-        let (a, b) = (agents[k % 3], agents[(k + 1) % 3]);
-        let m = call_json(
-            addr,
-            "POST",
-            "/api/v1/matches",
-            &format!("{{\"a\":\"{a}\",\"b\":\"{b}\",\"rallies\":20,\"seed\":{k}}}"),
-        )?;
-        ids.push(
-            m["id"]
-                .as_i64()
-                .ok_or_else(|| anyhow!("queueing failed: {m}"))?,
-        );
+        let q = wire::QueueMatch {
+            a: agents[k % 3].into(),
+            b: agents[(k + 1) % 3].into(),
+            rallies: 20,
+            seed: Some(k as u64),
+        };
+        let answer = call_json(addr, "POST", "/api/v1/matches", &serde_json::to_string(&q)?)?;
+        let m: wire::Match = serde_json::from_value(answer.clone())
+            .map_err(|e| anyhow!("queueing failed ({e}): {answer}"))?;
+        ids.push(m.id);
     }
     loop {
         // One request a poll: the workers share the machine with this loop.
-        let list = call_json(addr, "GET", "/api/v1/matches?limit=1000", "")?;
-        let ours: Vec<&serde_json::Value> = list["matches"]
-            .as_array()
-            .map(|all| {
-                all.iter()
-                    .filter(|m| m["id"].as_i64().is_some_and(|id| ids.contains(&id)))
-                    .collect()
-            })
-            .unwrap_or_default();
-        if let Some(m) = ours.iter().find(|m| m["status"] == "failed") {
-            return Err(anyhow!("a benchmark match failed: {m}"));
+        let list: wire::MatchList =
+            serde_json::from_value(call_json(addr, "GET", "/api/v1/matches?limit=1000", "")?)?;
+        let ours: Vec<&wire::Match> = list
+            .matches
+            .iter()
+            .filter(|m| ids.contains(&m.id))
+            .collect();
+        if let Some(m) = ours.iter().find(|m| m.status == wire::MatchStatus::Failed) {
+            return Err(anyhow!("benchmark match {} failed: {:?}", m.id, m.error));
         }
-        if ours.len() == ids.len() && ours.iter().all(|m| m["status"] == "done") {
+        if ours.len() == ids.len() && ours.iter().all(|m| m.status == wire::MatchStatus::Done) {
             break;
         }
         anyhow::ensure!(

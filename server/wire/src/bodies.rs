@@ -2,15 +2,16 @@
 //! server's handlers, `rally batch` and the tests, so that the three cannot drift apart (the OpenAPI
 //! document describes the same shapes for everyone else; `page::tests` holds it to the rows).
 //!
-//! Requests refuse unknown fields. Responses are the store's rows (`db::Match`, `db::Agent`, …),
+//! Requests refuse unknown fields. Responses are the store's rows (`Match`, `Agent`, …),
 //! flattened where the answer adds to a row.
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::db;
-use crate::domain::MatchStatus;
-use crate::tournament::{Cell, Progress, Standing};
+use crate::{
+    Agent, AgentCrossing, AgentDrift, Cell, Match, MatchStatus, Progress, Rally, RatingPoint, Sprt,
+    Standing, TournamentKind, Worker,
+};
 
 /// An agent in a request: its id or its name.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -54,7 +55,7 @@ pub struct QueueMatch {
 #[serde(deny_unknown_fields)]
 pub struct NewTournament {
     /// `round_robin` or `gauntlet`.
-    pub kind: String,
+    pub kind: TournamentKind,
     /// The agents (a gauntlet's challenger first).
     pub agents: Vec<AgentRef>,
     /// Rallies per match.
@@ -200,7 +201,7 @@ pub struct QualificationRule {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AgentList {
     /// Every agent, by id.
-    pub agents: Vec<db::Agent>,
+    pub agents: Vec<Agent>,
 }
 
 /// `GET /agents/{id}`: the row, its drift, its rally lengths and a trained checkpoint's provenance.
@@ -208,9 +209,9 @@ pub struct AgentList {
 pub struct AgentDetail {
     /// The row.
     #[serde(flatten)]
-    pub row: db::Agent,
+    pub row: Agent,
     /// Its drift over its finished matches.
-    pub drift: db::AgentDrift,
+    pub drift: AgentDrift,
     /// How many of its finished matches' rallies had each length (returns), shortest first.
     pub rally_lengths: Vec<RallyCount>,
     /// The `training` record a trained checkpoint carries (provenance, learning curve); none for
@@ -237,7 +238,7 @@ pub struct RatingHistory {
     /// `glicko2`.
     pub system: String,
     /// Oldest first.
-    pub history: Vec<db::RatingPoint>,
+    pub history: Vec<RatingPoint>,
 }
 
 /// `GET /agents/{id}/crossings`: the crossings of the hitting plane it is answerable for.
@@ -252,7 +253,7 @@ pub struct AgentCrossings {
     /// How many there are in all (the list stops at `limit`).
     pub total: i64,
     /// Newest match first.
-    pub crossings: Vec<db::AgentCrossing>,
+    pub crossings: Vec<AgentCrossing>,
 }
 
 /// The serve box at the hitting plane (docs/design.md §7), m.
@@ -270,9 +271,53 @@ pub struct ServeBox {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Submitted {
     /// The new row.
-    pub agent: db::Agent,
+    pub agent: Agent,
     /// Its qualification on P2 serves.
-    pub qualification: agents::eval::EvalReport,
+    pub qualification: Qualification,
+}
+
+/// A value with its 95% interval.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Interval {
+    /// The value.
+    pub value: f64,
+    /// Lower end of the interval.
+    pub low: f64,
+    /// Upper end of the interval.
+    pub high: f64,
+}
+
+/// A qualification: the submitted agent's evaluation on single P2 serves (the report of `rally eval
+/// --json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Qualification {
+    /// The agent's name.
+    pub agent: String,
+    /// Serve kind ("p2").
+    pub serve: String,
+    /// Evaluation seed.
+    pub seed: u64,
+    /// Episodes played.
+    pub episodes: usize,
+    /// Share of the serves hit (Wilson interval).
+    pub hit_rate: Interval,
+    /// Share of the serves returned into the opponent's court (Wilson interval).
+    pub success_rate: Interval,
+    /// Effort, ‖a‖₂ / n_a (normal interval).
+    pub effort: Interval,
+    /// Mean activation, ‖a‖₁ / n_a (normal interval).
+    pub mean_activation: Interval,
+    /// Mean activation up to and including the first contact.
+    #[serde(default)]
+    pub activation_to_contact: Option<Interval>,
+    /// Mean activation after the first contact.
+    #[serde(default)]
+    pub activation_after_contact: Option<Interval>,
+    /// Share of all control steps played after a first contact.
+    #[serde(default)]
+    pub after_contact_steps: Option<f64>,
+    /// How many episodes ended each way (SUCCESS, the referee's reason, TIME_LIMIT).
+    pub ends: Vec<(String, usize)>,
 }
 
 /// `POST /tokens` (201): the token, shown this once.
@@ -292,7 +337,7 @@ pub struct IssuedToken {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MatchList {
     /// The page, newest first.
-    pub matches: Vec<db::Match>,
+    pub matches: Vec<Match>,
     /// `?before=` this id gets the next page (absent on the last one).
     pub next_before: Option<i64>,
 }
@@ -313,9 +358,9 @@ pub struct SideDrift {
 pub struct MatchDetail {
     /// The row.
     #[serde(flatten)]
-    pub row: db::Match,
+    pub row: Match,
     /// Its rallies, by index.
-    pub rally_log: Vec<db::Rally>,
+    pub rally_log: Vec<Rally>,
     /// The match's drift statistics (both sides' returns), once done.
     pub drift: Option<Value>,
     /// Each side's.
@@ -353,7 +398,7 @@ pub struct SprtMatch {
 
 impl ContestMatch {
     /// The listed fields of `m`.
-    pub fn of(m: &db::Match) -> ContestMatch {
+    pub fn of(m: &Match) -> ContestMatch {
         ContestMatch {
             id: m.id,
             agent_a: m.agent_a,
@@ -381,7 +426,7 @@ pub struct TournamentSummary {
     /// Id.
     pub id: i64,
     /// `round_robin` or `gauntlet`.
-    pub kind: String,
+    pub kind: TournamentKind,
     /// Its agents, in the order given.
     pub agents: Vec<NamedAgent>,
     /// Rallies per match.
@@ -433,7 +478,7 @@ pub struct Bounds {
 pub struct SprtView {
     /// The row.
     #[serde(flatten)]
-    pub row: db::Sprt,
+    pub row: Sprt,
     /// Agent A's name.
     pub agent_a_name: String,
     /// Agent B's name.
@@ -452,7 +497,7 @@ pub struct SprtView {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SprtList {
     /// Newest first.
-    pub sprts: Vec<db::Sprt>,
+    pub sprts: Vec<Sprt>,
 }
 
 /// A worker as `GET /workers` shows it: its row, its heartbeat's age, whether its lease would still
@@ -461,7 +506,7 @@ pub struct SprtList {
 pub struct WorkerView {
     /// The row.
     #[serde(flatten)]
-    pub row: db::workers::Worker,
+    pub row: Worker,
     /// Seconds since its last heartbeat.
     pub seconds_since_heartbeat: f64,
     /// Running and beating within the lease time.
