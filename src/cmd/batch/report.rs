@@ -138,3 +138,19 @@ pub(super) fn print_standings(id: i64, label: &str, v: &wire::TournamentView) {
         println!("   {place:>5}");
     }
 }
+
+/// An SPRT's outcome: its hypotheses, status, matches, LLR within its bounds and Elo estimate.
+pub(super) fn print_sprt(id: i64, label: &str, v: &wire::SprtView) {
+    println!();
+    println!(
+        "sprt {id}: {label}, H0 {} / H1 {} Elo: {} after {} matches, LLR {:+.3} in [{:.3}, {:.3}], Elo estimate {}",
+        v.row.elo0,
+        v.row.elo1,
+        v.row.status,
+        v.row.matches_done,
+        v.row.llr,
+        v.bounds.lower,
+        v.bounds.upper,
+        v.elo_estimate.map_or("–".into(), |e| format!("{e:+.1}"))
+    );
+}
