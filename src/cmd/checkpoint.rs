@@ -1,10 +1,11 @@
 //! `rally checkpoint`: write a template checkpoint of the right shape, or validate one.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use agents::checkpoint::{Activation, Checkpoint};
 use agents::controller::{ControllerKind, ControllerSpec, PdGains, Synergies};
 use clap::{Args, Subcommand, ValueEnum};
+use sim::model::Model;
 
 use super::CliError;
 
@@ -79,127 +80,151 @@ enum CheckpointCommand {
 pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
     let model = args.model.load()?.model;
     match &args.command {
-        CheckpointCommand::Builtin { name } => {
-            let text = agents::builtins::checkpoint(name).ok_or_else(|| {
-                CliError::Usage(format!(
-                    "no built-in checkpoint '{name}'; there are: {}",
-                    agents::builtins::names().join(", ")
-                ))
-            })?;
-            println!("{}", text.trim_end());
-            Ok(())
-        }
+        CheckpointCommand::Builtin { name } => builtin(name),
         CheckpointCommand::Template {
             controller,
             hidden,
             activation,
             name,
-        } => {
-            let spec = match controller.as_str() {
-                "kmac" => ControllerSpec::Kmac {
-                    gains: PdGains { kp: 40.0, kd: 3.0 },
-                },
-                "muscle_pd" => ControllerSpec::MusclePd {
-                    gains: PdGains::MUSCLE_PD,
-                },
-                "direct" => ControllerSpec::Direct,
-                _ => ControllerSpec::Dynsyn {
-                    synergies: Synergies::derive(&model, 16, 0),
-                },
-            };
-            if hidden.contains(&0) {
-                return Err(CliError::Usage(
-                    "--hidden: layer widths must be positive".into(),
-                ));
-            }
-            let act = match activation {
-                Act::Elu => Activation::Elu,
-                Act::Tanh => Activation::Tanh,
-                Act::Relu => Activation::Relu,
-            };
-            let c = Checkpoint::template(&model, name, spec, hidden, act);
-            c.validate(&model)
-                .map_err(|e| CliError::Usage(e.to_string()))?;
-            println!(
-                "{}",
-                serde_json::to_string(&c).map_err(anyhow::Error::from)?
-            );
-            Ok(())
-        }
-        CheckpointCommand::Validate { file } => {
-            let text = std::fs::read_to_string(file)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
-            let c = Checkpoint::from_json(&text, &model)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
-            let kind: ControllerKind = c.controller.kind();
-            println!(
-                "{}: valid — '{}', {:?} controller, observation {} entries, {}",
-                file.display(),
-                c.name,
-                kind,
-                c.observation.mean.len(),
-                match &c.policy {
-                    Some(p) => format!(
-                        "MLP of {} layers, {} parameters",
-                        p.layers.len(),
-                        p.parameters()
-                    ),
-                    None => "ONNX network".to_string(),
-                }
-            );
-            Ok(())
-        }
+        } => template(&model, controller, hidden, *activation, name),
+        CheckpointCommand::Validate { file } => validate(&model, file),
         CheckpointCommand::ScaleNoise {
             file,
             factor,
             name,
             out,
             note,
-        } => {
-            if !(factor.is_finite() && *factor >= 0.0) {
-                return Err(CliError::Usage(format!(
-                    "--factor {factor}: expected a finite number ≥ 0"
-                )));
-            }
-            let same = |a: &PathBuf, b: &PathBuf| match (a.canonicalize(), b.canonicalize()) {
-                (Ok(x), Ok(y)) => x == y,
-                _ => false,
-            };
-            if same(file, out) {
-                return Err(CliError::Usage(
-                    "--out: give another file than the input".into(),
-                ));
-            }
-            let text = std::fs::read_to_string(file)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
-            let mut c = Checkpoint::from_json(&text, &model)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
-            c.scale_noise(*factor)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
-            if let Some(n) = name {
-                c.name = n.clone();
-            }
-            if let (Some(t), Some(extra)) = (c.training.as_mut(), note) {
-                t.note = Some(match t.note.take() {
-                    Some(old) => format!("{old} {extra}"),
-                    None => extra.clone(),
-                });
-            }
-            c.validate(&model)
-                .map_err(|e| CliError::Usage(e.to_string()))?;
-            let json = serde_json::to_string(&c).map_err(anyhow::Error::from)?;
-            std::fs::write(out, json)
-                .map_err(|e| CliError::Usage(format!("{}: {e}", out.display())))?;
-            println!(
-                "{}: '{}' plays with {} × its trained action noise",
-                out.display(),
-                c.name,
-                c.training
-                    .as_ref()
-                    .and_then(|t| t.noise_scale)
-                    .unwrap_or(*factor)
-            );
-            Ok(())
-        }
+        } => scale_noise(&model, file, *factor, name.as_deref(), out, note.as_deref()),
     }
+}
+
+/// `rally checkpoint builtin NAME`: prints the embedded checkpoint.
+fn builtin(name: &str) -> Result<(), CliError> {
+    let text = agents::builtins::checkpoint(name).ok_or_else(|| {
+        CliError::Usage(format!(
+            "no built-in checkpoint '{name}'; there are: {}",
+            agents::builtins::names().join(", ")
+        ))
+    })?;
+    println!("{}", text.trim_end());
+    Ok(())
+}
+
+/// `rally checkpoint template`: prints a zero-weight checkpoint of the robot's shape.
+fn template(
+    model: &Model,
+    controller: &str,
+    hidden: &[usize],
+    activation: Act,
+    name: &str,
+) -> Result<(), CliError> {
+    let spec = match controller {
+        "kmac" => ControllerSpec::Kmac {
+            gains: PdGains { kp: 40.0, kd: 3.0 },
+        },
+        "muscle_pd" => ControllerSpec::MusclePd {
+            gains: PdGains::MUSCLE_PD,
+        },
+        "direct" => ControllerSpec::Direct,
+        _ => ControllerSpec::Dynsyn {
+            synergies: Synergies::derive(model, 16, 0),
+        },
+    };
+    if hidden.contains(&0) {
+        return Err(CliError::Usage(
+            "--hidden: layer widths must be positive".into(),
+        ));
+    }
+    let act = match activation {
+        Act::Elu => Activation::Elu,
+        Act::Tanh => Activation::Tanh,
+        Act::Relu => Activation::Relu,
+    };
+    let c = Checkpoint::template(model, name, spec, hidden, act);
+    c.validate(model)
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    println!(
+        "{}",
+        serde_json::to_string(&c).map_err(anyhow::Error::from)?
+    );
+    Ok(())
+}
+
+/// `rally checkpoint validate FILE`: checks it against the robot and prints its shape.
+fn validate(model: &Model, file: &Path) -> Result<(), CliError> {
+    let text = std::fs::read_to_string(file)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+    let c = Checkpoint::from_json(&text, model)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+    let kind: ControllerKind = c.controller.kind();
+    println!(
+        "{}: valid — '{}', {:?} controller, observation {} entries, {}",
+        file.display(),
+        c.name,
+        kind,
+        c.observation.mean.len(),
+        match &c.policy {
+            Some(p) => format!(
+                "MLP of {} layers, {} parameters",
+                p.layers.len(),
+                p.parameters()
+            ),
+            None => "ONNX network".to_string(),
+        }
+    );
+    Ok(())
+}
+
+/// `rally checkpoint scale-noise FILE`: writes it to `out` with `factor` times its action noise.
+fn scale_noise(
+    model: &Model,
+    file: &Path,
+    factor: f64,
+    name: Option<&str>,
+    out: &Path,
+    note: Option<&str>,
+) -> Result<(), CliError> {
+    if !(factor.is_finite() && factor >= 0.0) {
+        return Err(CliError::Usage(format!(
+            "--factor {factor}: expected a finite number ≥ 0"
+        )));
+    }
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    };
+    if same(file, out) {
+        return Err(CliError::Usage(
+            "--out: give another file than the input".into(),
+        ));
+    }
+    let text = std::fs::read_to_string(file)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+    let mut c = Checkpoint::from_json(&text, model)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+    c.scale_noise(factor)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", file.display())))?;
+    if let Some(n) = name {
+        c.name = n.to_string();
+    }
+    if let (Some(t), Some(extra)) = (c.training.as_mut(), note) {
+        t.note = Some(match t.note.take() {
+            Some(old) => format!("{old} {extra}"),
+            None => extra.to_string(),
+        });
+    }
+    c.validate(model)
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_string(&c).map_err(anyhow::Error::from)?;
+    std::fs::write(out, json).map_err(|e| CliError::Usage(format!("{}: {e}", out.display())))?;
+    println!(
+        "{}: '{}' plays with {} × its trained action noise",
+        out.display(),
+        c.name,
+        c.training
+            .as_ref()
+            .and_then(|t| t.noise_scale)
+            .unwrap_or(factor)
+    );
+    Ok(())
 }

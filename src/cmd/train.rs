@@ -143,16 +143,10 @@ fn status_line(r: &CurveRow, steps_per_s: f64, env: TrainEnv) -> String {
 }
 
 /// Saves the checkpoint, the curve (CSV and PNG) and, at a segment boundary, the resumable state.
-fn save(
-    dir: &RunDir,
-    t: &Trainer,
-    name: &str,
-    command: &str,
-    commit: &str,
-    with_state: bool,
-) -> Result<(), CliError> {
+fn save(out: &Outputs, t: &Trainer, with_state: bool) -> Result<(), CliError> {
+    let dir = &out.dir;
     let ck = t
-        .checkpoint(name, command, commit)
+        .checkpoint(&out.name, &out.command, &out.commit)
         .map_err(|e| anyhow!(e))?;
     let json = serde_json::to_vec(&ck).map_err(anyhow::Error::from)?;
     write_atomic(&dir.checkpoint_path(), &json).map_err(|e| anyhow!(e))?;
@@ -188,14 +182,8 @@ fn validation_words(env: TrainEnv, v: &ValidationPoint) -> String {
 /// Validates the policy (`[validation]` of the configuration), records it in the run's
 /// `validation.csv` and, when it is the best so far, writes it to `best.json` with a note that says
 /// how it was chosen.
-fn validate(
-    dir: &RunDir,
-    t: &mut Trainer,
-    name: &str,
-    command: &str,
-    commit: &str,
-    bar: &ProgressBar,
-) -> Result<(), CliError> {
+fn validate(out: &Outputs, t: &mut Trainer, bar: &ProgressBar) -> Result<(), CliError> {
+    let dir = &out.dir;
     let point = t.validate().map_err(|e| anyhow!(e))?;
     let best_before = t.progress.best_validation().map(|b| b.score);
     t.progress.validations.push(point);
@@ -203,7 +191,7 @@ fn validate(
     let is_best = best_before.is_none_or(|b| point.score > b);
     if is_best {
         let mut ck = t
-            .validation_checkpoint(name, command, commit)
+            .validation_checkpoint(&out.name, &out.command, &out.commit)
             .map_err(|e| anyhow!(e))?;
         if let Some(tr) = ck.training.as_mut() {
             tr.note = Some(format!(
@@ -236,11 +224,7 @@ fn validate(
             ""
         }
     );
-    if bar.is_hidden() {
-        eprintln!("{line}");
-    } else {
-        bar.println(line);
-    }
+    say(bar, line);
     Ok(())
 }
 
@@ -248,6 +232,58 @@ fn validate(
 pub fn run(args: &TrainArgs) -> Result<(), CliError> {
     agents::ppo::fix_matmul_threads();
     let body = args.model.load()?;
+    let config = configuration(args)?;
+    let dir = RunDir::open(&args.out).map_err(|e| CliError::Usage(format!("--out: {e}")))?;
+    let mut trainer = if args.resume {
+        resume(args, &dir, &config, body)?
+    } else {
+        start(args, &dir, config, body)?
+    };
+    let out = Outputs {
+        dir,
+        name: args
+            .name
+            .clone()
+            .unwrap_or_else(|| match trainer.config.env {
+                TrainEnv::Single => args.method.checkpoint_name().to_string(),
+                TrainEnv::Rally => format!("{}-rally", args.method.checkpoint_name()),
+            }),
+        command: std::env::args()
+            .map(|a| if a.contains(' ') { format!("'{a}'") } else { a })
+            .collect::<Vec<_>>()
+            .join(" "),
+        commit: git_commit(),
+    };
+    let every = trainer.config.ppo.checkpoint_every as u64;
+    let bar = progress_bar(args, &trainer);
+    let started = std::time::Instant::now();
+    train(args, &mut trainer, &out, &bar, started)?;
+    let at_boundary = trainer.progress.iteration.is_multiple_of(every);
+    save(&out, &trainer, at_boundary)?;
+    bar.finish_and_clear();
+    report(args, &trainer, &out.dir, started);
+    if !at_boundary {
+        println!(
+            "(the resumable state is from iteration {}; --resume continues from there)",
+            trainer.progress.iteration - trainer.progress.iteration % every
+        );
+    }
+    Ok(())
+}
+
+/// Where and as what the run's checkpoints are written.
+struct Outputs {
+    dir: RunDir,
+    /// The checkpoints' name.
+    name: String,
+    /// The command line, recorded in the checkpoints.
+    command: String,
+    /// The binary's commit, recorded too.
+    commit: String,
+}
+
+/// The configuration: `--config`'s (else the default), with `--env` and `--serve` laid over it.
+fn configuration(args: &TrainArgs) -> Result<TrainConfig, CliError> {
     let mut config = match &args.config {
         Some(p) => read_config(p)?,
         None => TrainConfig::default(),
@@ -258,88 +294,95 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
     if let Some(serve) = args.serve {
         config.serve = serve;
     }
-    let dir = RunDir::open(&args.out).map_err(|e| CliError::Usage(format!("--out: {e}")))?;
-    let mut trainer = if args.resume {
-        let state = dir
-            .read_state()
-            .map_err(|e| CliError::Usage(format!("--resume: {e}")))?;
-        if state.method != args.method || state.seed != args.seed {
-            return Err(CliError::Usage(format!(
-                "--resume: {} holds a {} run with seed {}, not {} with seed {}",
-                args.out.display(),
-                state.method.name(),
-                state.seed,
-                args.method.name(),
-                args.seed
-            )));
-        }
-        if let Some(env) = args.env.filter(|&e| e != state.config.env) {
-            return Err(CliError::Usage(format!(
-                "--resume: {} was trained in the {} environment, not {}",
-                args.out.display(),
-                state.config.env.name(),
-                env.name()
-            )));
-        }
-        if let Some(serve) = args.serve.filter(|&s| s != state.config.serve) {
-            return Err(CliError::Usage(format!(
-                "--resume: {} was trained on {:?} serves, not {serve:?}",
-                args.out.display(),
-                state.config.serve
-            )));
-        }
-        if args.config.is_some() && state.config != config {
-            return Err(CliError::Usage(format!(
-                "--resume: --config differs from the configuration {} was started with",
-                args.out.display()
-            )));
-        }
-        if state.model != body.name {
-            return Err(CliError::Usage(format!(
-                "--resume: {} trains the {} robot, not {} (--model)",
-                args.out.display(),
-                state.model,
-                body.name
-            )));
-        }
-        dir.load_on(body.model, body.config, &body.name)
-            .map_err(|e| anyhow!(e))?
-    } else {
-        if dir.has_state() {
-            return Err(CliError::Usage(format!(
-                "--out {} already holds a run: pass --resume to continue it, or choose another directory",
-                args.out.display()
-            )));
-        }
-        let mut t = Trainer::on(
-            body.model,
-            body.config,
-            &body.name,
-            args.method,
-            config,
-            args.seed,
-        )
-        .map_err(|e| anyhow!(e))?;
-        if let Some(init) = &args.init {
-            RunDir::open(init)
-                .and_then(|d| d.warm_start(&mut t, args.init_optimizer.into()))
-                .map_err(|e| CliError::Usage(format!("--init: {e}")))?;
-        }
-        t
-    };
-    let name = args
-        .name
-        .clone()
-        .unwrap_or_else(|| match trainer.config.env {
-            TrainEnv::Single => args.method.checkpoint_name().to_string(),
-            TrainEnv::Rally => format!("{}-rally", args.method.checkpoint_name()),
-        });
-    let command = std::env::args()
-        .map(|a| if a.contains(' ') { format!("'{a}'") } else { a })
-        .collect::<Vec<_>>()
-        .join(" ");
-    let commit = git_commit();
-    let every = trainer.config.ppo.checkpoint_every as u64;
+    Ok(config)
+}
+
+/// The run saved in `dir`, refused unless the arguments describe the same run.
+fn resume(
+    args: &TrainArgs,
+    dir: &RunDir,
+    config: &TrainConfig,
+    body: super::Body,
+) -> Result<Trainer, CliError> {
+    let state = dir
+        .read_state()
+        .map_err(|e| CliError::Usage(format!("--resume: {e}")))?;
+    if state.method != args.method || state.seed != args.seed {
+        return Err(CliError::Usage(format!(
+            "--resume: {} holds a {} run with seed {}, not {} with seed {}",
+            args.out.display(),
+            state.method.name(),
+            state.seed,
+            args.method.name(),
+            args.seed
+        )));
+    }
+    if let Some(env) = args.env.filter(|&e| e != state.config.env) {
+        return Err(CliError::Usage(format!(
+            "--resume: {} was trained in the {} environment, not {}",
+            args.out.display(),
+            state.config.env.name(),
+            env.name()
+        )));
+    }
+    if let Some(serve) = args.serve.filter(|&s| s != state.config.serve) {
+        return Err(CliError::Usage(format!(
+            "--resume: {} was trained on {:?} serves, not {serve:?}",
+            args.out.display(),
+            state.config.serve
+        )));
+    }
+    if args.config.is_some() && state.config != *config {
+        return Err(CliError::Usage(format!(
+            "--resume: --config differs from the configuration {} was started with",
+            args.out.display()
+        )));
+    }
+    if state.model != body.name {
+        return Err(CliError::Usage(format!(
+            "--resume: {} trains the {} robot, not {} (--model)",
+            args.out.display(),
+            state.model,
+            body.name
+        )));
+    }
+    Ok(dir
+        .load_on(body.model, body.config, &body.name)
+        .map_err(|e| anyhow!(e))?)
+}
+
+/// A fresh run in `dir` (which must not hold one), warm-started from `--init` if given.
+fn start(
+    args: &TrainArgs,
+    dir: &RunDir,
+    config: TrainConfig,
+    body: super::Body,
+) -> Result<Trainer, CliError> {
+    if dir.has_state() {
+        return Err(CliError::Usage(format!(
+            "--out {} already holds a run: pass --resume to continue it, or choose another directory",
+            args.out.display()
+        )));
+    }
+    let mut t = Trainer::on(
+        body.model,
+        body.config,
+        &body.name,
+        args.method,
+        config,
+        args.seed,
+    )
+    .map_err(|e| anyhow!(e))?;
+    if let Some(init) = &args.init {
+        RunDir::open(init)
+            .and_then(|d| d.warm_start(&mut t, args.init_optimizer.into()))
+            .map_err(|e| CliError::Usage(format!("--init: {e}")))?;
+    }
+    Ok(t)
+}
+
+/// The bar of the steps to `--steps` (hidden with `--quiet`), at the run's steps so far.
+fn progress_bar(args: &TrainArgs, trainer: &Trainer) -> ProgressBar {
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -350,7 +393,27 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
             .expect("valid template"),
     );
     bar.set_position(trainer.progress.env_steps.min(args.steps));
-    let started = std::time::Instant::now();
+    bar
+}
+
+/// A line above the bar, or on stderr when it is hidden.
+fn say(bar: &ProgressBar, line: String) {
+    if bar.is_hidden() {
+        eprintln!("{line}");
+    } else {
+        bar.println(line);
+    }
+}
+
+/// Iterates until `--steps`, validating, refreshing the bank and saving at their intervals.
+fn train(
+    args: &TrainArgs,
+    trainer: &mut Trainer,
+    out: &Outputs,
+    bar: &ProgressBar,
+    started: std::time::Instant,
+) -> Result<(), CliError> {
+    let every = trainer.config.ppo.checkpoint_every as u64;
     let first_steps = trainer.progress.env_steps;
     while trainer.progress.env_steps < args.steps {
         let row = trainer.iterate().map_err(|e| anyhow!(e))?;
@@ -359,7 +422,7 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         bar.set_message(status_line(&row, rate, trainer.config.env));
         let v_every = trainer.config.validation.every as u64;
         if v_every > 0 && row.iteration.is_multiple_of(v_every) {
-            validate(&dir, &mut trainer, &name, &command, &commit, &bar)?;
+            validate(out, trainer, bar)?;
         }
         let r_every = trainer.config.bank.refresh_every as u64;
         if r_every > 0 && row.iteration.is_multiple_of(r_every) {
@@ -368,15 +431,11 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
                 "bank at iteration {}: {n} returns of the policy in {} self-play rallies",
                 row.iteration, trainer.config.bank.refresh_rallies
             );
-            if bar.is_hidden() {
-                eprintln!("{line}");
-            } else {
-                bar.println(line);
-            }
+            say(bar, line);
         }
         let boundary = row.iteration.is_multiple_of(every);
         if boundary {
-            save(&dir, &trainer, &name, &command, &commit, true)?;
+            save(out, trainer, true)?;
             if args.quiet {
                 eprintln!(
                     "iteration {} ({} steps): {}",
@@ -387,9 +446,12 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
             }
         }
     }
-    let at_boundary = trainer.progress.iteration.is_multiple_of(every);
-    save(&dir, &trainer, &name, &command, &commit, at_boundary)?;
-    bar.finish_and_clear();
+    Ok(())
+}
+
+/// What the run did: its steps and time split, the last episodes, where the checkpoint and the best
+/// validation are.
+fn report(args: &TrainArgs, trainer: &Trainer, dir: &RunDir, started: std::time::Instant) {
     let last = trainer.progress.curve.last().copied().unwrap_or_default();
     let t = trainer.timing;
     println!(
@@ -420,13 +482,6 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
             dir.best_path().display()
         );
     }
-    if !at_boundary {
-        println!(
-            "(the resumable state is from iteration {}; --resume continues from there)",
-            trainer.progress.iteration - trainer.progress.iteration % every
-        );
-    }
-    Ok(())
 }
 
 /// `--init-optimizer`.

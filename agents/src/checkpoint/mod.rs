@@ -210,6 +210,16 @@ impl Checkpoint {
 
     /// Checks every field against `model`.
     pub fn validate(&self, model: &Model) -> Result<(), CheckpointError> {
+        self.validate_header()?;
+        let space = ActionSpace::new(model);
+        self.validate_controller(&space)?;
+        let obs = self.validate_observation(&space)?;
+        let width = self.network_width(obs)?;
+        self.validate_actions(model, width)
+    }
+
+    /// Format, version and name.
+    fn validate_header(&self) -> Result<(), CheckpointError> {
         if self.format != FORMAT {
             return Err(bad(
                 "format",
@@ -225,7 +235,11 @@ impl Checkpoint {
         if self.name.trim().is_empty() || self.name.len() > 100 {
             return Err(bad("name", "must be 1 to 100 characters"));
         }
-        let space = ActionSpace::new(model);
+        Ok(())
+    }
+
+    /// The controller's gains or synergies against the model's muscles, and the grip floor.
+    fn validate_controller(&self, space: &ActionSpace) -> Result<(), CheckpointError> {
         if let ControllerSpec::Kmac { gains } | ControllerSpec::MusclePd { gains } =
             &self.controller
         {
@@ -260,11 +274,16 @@ impl Checkpoint {
                 return Err(bad("grip_floor", "must be a control between 0 and 1"));
             }
         }
+        Ok(())
+    }
+
+    /// The observation's blocks and normalisation; returns its size.
+    fn validate_observation(&self, space: &ActionSpace) -> Result<usize, CheckpointError> {
         let o = &self.observation;
         if o.blocks.is_empty() {
             return Err(bad("observation.blocks", "empty"));
         }
-        let obs: usize = o.blocks.iter().map(|b| b.size(&space)).sum();
+        let obs: usize = o.blocks.iter().map(|b| b.size(space)).sum();
         for (field, v) in [("observation.mean", &o.mean), ("observation.std", &o.std)] {
             if v.len() != obs {
                 return Err(bad(
@@ -279,7 +298,13 @@ impl Checkpoint {
         if let Some(i) = o.std.iter().position(|s| *s <= 0.0) {
             return Err(bad(format!("observation.std[{i}]"), "must be positive"));
         }
-        let width = match (&self.policy, &self.onnx) {
+        Ok(obs)
+    }
+
+    /// The network (an MLP or an ONNX model, which must run on a zero observation) for `obs`
+    /// inputs; returns its output width.
+    fn network_width(&self, obs: usize) -> Result<usize, CheckpointError> {
+        Ok(match (&self.policy, &self.onnx) {
             (Some(p), None) => validate_mlp(p, obs)?,
             (None, Some(o)) => {
                 let plan = load_onnx(o, obs)?;
@@ -306,7 +331,11 @@ impl Checkpoint {
                 ))
             }
             (None, None) => return Err(bad("policy", "missing: give `policy` (an MLP) or `onnx`")),
-        };
+        })
+    }
+
+    /// The policy noise and the network's width against the controller's actions on `model`.
+    fn validate_actions(&self, model: &Model, width: usize) -> Result<(), CheckpointError> {
         let mapper = ActionMapper::new(model, &self.controller);
         if let Some(std) = &self.policy_std {
             if std.len() != mapper.action_dim() {

@@ -10,7 +10,7 @@ pub(super) fn name_of(names: &HashMap<i64, String>, id: Option<i64>) -> String {
 pub(super) fn write_csv(
     path: &Path,
     order: &[i64],
-    rows: &HashMap<i64, db::Match>,
+    rows: &HashMap<i64, wire::Match>,
     names: &HashMap<i64, String>,
 ) -> anyhow::Result<()> {
     let mut w = csv::Writer::from_path(path)?;
@@ -65,12 +65,12 @@ pub(super) fn write_csv(
 /// Per agent over the batch's finished matches: matches, wins/draws/losses, points, mean rally length.
 pub(super) fn print_summary(
     order: &[i64],
-    rows: &HashMap<i64, db::Match>,
+    rows: &HashMap<i64, wire::Match>,
     names: &HashMap<i64, String>,
 ) {
     #[derive(Default)]
     struct Line {
-        record: server::tournament::Record,
+        record: wire::Record,
         rally_sum: f64,
     }
     let mut lines: HashMap<i64, Line> = HashMap::new();
@@ -137,4 +137,20 @@ pub(super) fn print_standings(id: i64, label: &str, v: &wire::TournamentView) {
             .map_or("?".into(), |s| s.place.to_string());
         println!("   {place:>5}");
     }
+}
+
+/// An SPRT's outcome: its hypotheses, status, matches, LLR within its bounds and Elo estimate.
+pub(super) fn print_sprt(id: i64, label: &str, v: &wire::SprtView) {
+    println!();
+    println!(
+        "sprt {id}: {label}, H0 {} / H1 {} Elo: {} after {} matches, LLR {:+.3} in [{:.3}, {:.3}], Elo estimate {}",
+        v.row.elo0,
+        v.row.elo1,
+        v.row.status,
+        v.row.matches_done,
+        v.row.llr,
+        v.bounds.lower,
+        v.bounds.upper,
+        v.elo_estimate.map_or("–".into(), |e| format!("{e:+.1}"))
+    );
 }

@@ -299,182 +299,203 @@ pub fn run(args: &BenchArgs) -> Result<(), CliError> {
         ));
     }
     match args.target {
-        Target::Train => {
-            let (model, config, _) = robot::bench_model(&args.model)?;
-            let mut r = train_rates(args.seconds, model, config)?;
-            r["model"] = args.model.clone().into();
-            if args.json {
-                println!("{r}");
-            } else {
-                let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
-                let s = |k: &str| 100.0 * r["share"][k].as_f64().unwrap_or(f64::NAN);
+        Target::Train => bench_train(args),
+        Target::Scale => bench_scale(args),
+        Target::Server => bench_server(args),
+        Target::Ball => bench_ball(args),
+        Target::Agents => bench_agents(args),
+        Target::Robot => bench_robot(args),
+    }
+}
+
+/// `rally bench train`: PPO training rates next to the physics alone.
+fn bench_train(args: &BenchArgs) -> Result<(), CliError> {
+    let (model, config, _) = robot::bench_model(&args.model)?;
+    let mut r = train_rates(args.seconds, model, config)?;
+    r["model"] = args.model.clone().into();
+    if args.json {
+        println!("{r}");
+    } else {
+        let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+        let s = |k: &str| 100.0 * r["share"][k].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "PPO training, K-MAC, model {}, {} environments, {} threads ({} iterations, {} control steps):",
+            args.model, r["envs"], r["threads"], r["iterations"], r["env_steps"]
+        );
+        println!(
+            "  training       {:>9.0} env steps/s (rollout and update)",
+            f("training_steps_per_second")
+        );
+        println!(
+            "  rollout phase  {:>9.0} env steps/s (simulation and policy)",
+            f("rollout_steps_per_second")
+        );
+        println!(
+            "  physics alone  {:>9.0} env steps/s (same environments, fixed controls: the ceiling)",
+            f("physics_alone_steps_per_second")
+        );
+        println!("  rollout / physics alone {:.2}", f("rollout_vs_physics"));
+        println!(
+            "  time: simulation {:.0}%, policy {:.0}%, update {:.0}%",
+            s("simulation"),
+            s("policy"),
+            s("update")
+        );
+    }
+    Ok(())
+}
+
+/// `rally bench scale`: the store's overhead per match and the scale-out, per engine.
+fn bench_scale(args: &BenchArgs) -> Result<(), CliError> {
+    let r = scale::scale_bench(args.postgres.as_deref(), args.seconds)?;
+    if args.json {
+        println!("{r}");
+    } else {
+        let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "scale-out ({} cores; {} matches of {} rallies per throughput figure, scripted built-ins):",
+            r["cores"], r["throughput_matches"], r["throughput_rallies"]
+        );
+        for e in r["engines"].as_array().into_iter().flatten() {
+            let o = &e["overhead"];
+            println!("{}:", e["engine"].as_str().unwrap_or("?"));
+            for k in ["claim", "store", "claim_and_store"] {
                 println!(
-                    "PPO training, K-MAC, model {}, {} environments, {} threads ({} iterations, {} control steps):",
-                    args.model, r["envs"], r["threads"], r["iterations"], r["env_steps"]
-                );
-                println!(
-                    "  training       {:>9.0} env steps/s (rollout and update)",
-                    f("training_steps_per_second")
-                );
-                println!(
-                    "  rollout phase  {:>9.0} env steps/s (simulation and policy)",
-                    f("rollout_steps_per_second")
-                );
-                println!("  physics alone  {:>9.0} env steps/s (same environments, fixed controls: the ceiling)", f("physics_alone_steps_per_second"));
-                println!("  rollout / physics alone {:.2}", f("rollout_vs_physics"));
-                println!(
-                    "  time: simulation {:.0}%, policy {:.0}%, update {:.0}%",
-                    s("simulation"),
-                    s("policy"),
-                    s("update")
+                    "  {k:<16} {:>7.2} ms mean   p50 {:.2} ms   p99 {:.2} ms   ({} matches)",
+                    f(&o[k], "mean_ms"),
+                    f(&o[k], "p50_ms"),
+                    f(&o[k], "p99_ms"),
+                    o["matches"]
                 );
             }
-            Ok(())
+            let serve = f(e, "serve_one_worker_matches_per_hour");
+            println!(
+                "  matches/h: rally serve, 1 worker of its own       {serve:>8.0}   ({:.2}x SQLite's)",
+                f(e, "serve_vs_sqlite_serve")
+            );
+            for p in e["worker_processes"].as_array().into_iter().flatten() {
+                println!(
+                    "  matches/h: rally serve --workers 0 + {} x worker  {:>8.0}   ({:.2}x SQLite's rally serve)",
+                    p["worker_processes"],
+                    f(p, "matches_per_hour"),
+                    f(p, "vs_sqlite_serve")
+                );
+            }
+            let b = &e["leaderboard"];
+            println!(
+                "  leaderboard      {:>7.0} requests/s   p50 {:.2} ms   p99 {:.2} ms   (8 clients)",
+                f(b, "requests_per_second"),
+                f(b, "p50_ms"),
+                f(b, "p99_ms")
+            );
         }
-        Target::Scale => {
-            let r = scale::scale_bench(args.postgres.as_deref(), args.seconds)?;
-            if args.json {
-                println!("{r}");
-            } else {
-                let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-                println!(
-                    "scale-out ({} cores; {} matches of {} rallies per throughput figure, scripted built-ins):",
-                    r["cores"], r["throughput_matches"], r["throughput_rallies"]
-                );
-                for e in r["engines"].as_array().into_iter().flatten() {
-                    let o = &e["overhead"];
-                    println!("{}:", e["engine"].as_str().unwrap_or("?"));
-                    for k in ["claim", "store", "claim_and_store"] {
-                        println!(
-                            "  {k:<16} {:>7.2} ms mean   p50 {:.2} ms   p99 {:.2} ms   ({} matches)",
-                            f(&o[k], "mean_ms"),
-                            f(&o[k], "p50_ms"),
-                            f(&o[k], "p99_ms"),
-                            o["matches"]
-                        );
-                    }
-                    let serve = f(e, "serve_one_worker_matches_per_hour");
-                    println!(
-                        "  matches/h: rally serve, 1 worker of its own       {serve:>8.0}   ({:.2}x SQLite's)",
-                        f(e, "serve_vs_sqlite_serve")
-                    );
-                    for p in e["worker_processes"].as_array().into_iter().flatten() {
-                        println!(
-                            "  matches/h: rally serve --workers 0 + {} x worker  {:>8.0}   ({:.2}x SQLite's rally serve)",
-                            p["worker_processes"],
-                            f(p, "matches_per_hour"),
-                            f(p, "vs_sqlite_serve")
-                        );
-                    }
-                    let b = &e["leaderboard"];
-                    println!(
-                        "  leaderboard      {:>7.0} requests/s   p50 {:.2} ms   p99 {:.2} ms   (8 clients)",
-                        f(b, "requests_per_second"),
-                        f(b, "p50_ms"),
-                        f(b, "p99_ms")
-                    );
-                }
-                if r["postgres"] != "measured" {
-                    println!("PostgreSQL: {}", r["postgres"].as_str().unwrap_or(""));
-                }
-            }
-            Ok(())
-        }
-        Target::Server => {
-            let r = server_bench(args.seconds, args.clients as usize)?;
-            if args.json {
-                println!("{r}");
-            } else {
-                let f = |k: &str, q: &str| r[k][q].as_f64().unwrap_or(f64::NAN);
-                println!(
-                    "tournament server (2 workers, fresh SQLite), {} keep-alive clients:",
-                    r["clients"]
-                );
-                println!(
-                    "  matches       {:>9.0} matches/h (20 rallies, scripted built-ins)",
-                    r["matches_per_hour_20_rallies"]
-                        .as_f64()
-                        .unwrap_or(f64::NAN)
-                );
-                println!("  while {} matches run:", r["matches_running_during_load"]);
-                for k in ["leaderboard", "healthz"] {
-                    println!(
-                        "  {k:<12}  {:>9.0} req/s   p50 {:.2} ms   p99 {:.2} ms",
-                        f(k, "requests_per_second"),
-                        f(k, "p50_ms"),
-                        f(k, "p99_ms")
-                    );
-                }
-                println!(
-                    "  leaderboard / healthz throughput {:.2}",
-                    r["leaderboard_vs_healthz_throughput"]
-                        .as_f64()
-                        .unwrap_or(f64::NAN)
-                );
-                println!(
-                    "  server memory: peak RSS {:.1} MiB",
-                    r["server_peak_rss_mib"].as_f64().unwrap_or(f64::NAN)
-                );
-            }
-            Ok(())
-        }
-        Target::Ball => {
-            let mujoco = if args.mujoco {
-                Some(mujoco_steps_per_second(&args.python, args.seconds)?)
-            } else {
-                None
-            };
-            let (ours, steps) = ball_steps_per_second(args.seconds);
-            let ratio = mujoco.as_ref().map(|(m, _)| ours / m);
-            if args.json {
-                println!(
-                    "{}",
-                    json!({
-                        "target": "ball",
-                        "steps_per_second": ours,
-                        "steps": steps,
-                        "mujoco_steps_per_second": mujoco.as_ref().map(|m| m.0),
-                        "mujoco_version": mujoco.as_ref().map(|m| m.1.clone()),
-                        "ratio_vs_mujoco": ratio,
-                    })
-                );
-            } else {
-                println!("ball world (ball, table, net, one moving paddle), single thread:");
-                println!("  muscle-rally  {ours:>12.0} steps/s");
-                if let (Some((m, version)), Some(r)) = (&mujoco, ratio) {
-                    println!("  MuJoCo {version:<6} {m:>12.0} steps/s  (ball-only reference scene, mj_step nstep)");
-                    println!("  ratio         {r:>12.1}x");
-                }
-            }
-            Ok(())
-        }
-        Target::Agents => {
-            let (model, config, _) = robot::bench_model(&args.model)?;
-            let (eps, rps, rally_s) = agent_rates(args.seconds, model, config)?;
-            if args.json {
-                println!(
-                    "{}",
-                    json!({"target": "agents", "model": args.model, "episodes_per_second": eps, "rallies_per_second": rps, "simulated_seconds_per_rally": rally_s})
-                );
-            } else {
-                println!("scripted agent, model {}, one core:", args.model);
-                println!("  evaluation    {eps:>8.1} single-serve episodes/s (P2)");
-                println!("  match         {rps:>8.1} rallies/s (scripted vs scripted, {rally_s:.2} simulated s per rally)");
-            }
-            Ok(())
-        }
-        Target::Robot => {
-            let r = robot::measure(
-                &args.model,
-                args.seconds,
-                args.mujoco.then_some(args.python.as_path()),
-            )?;
-            if args.json {
-                println!("{r}");
-            } else {
-                robot::print(&r);
-            }
-            Ok(())
+        if r["postgres"] != "measured" {
+            println!("PostgreSQL: {}", r["postgres"].as_str().unwrap_or(""));
         }
     }
+    Ok(())
+}
+
+/// `rally bench server`: the tournament server from outside.
+fn bench_server(args: &BenchArgs) -> Result<(), CliError> {
+    let r = server_bench(args.seconds, args.clients as usize)?;
+    if args.json {
+        println!("{r}");
+    } else {
+        let f = |k: &str, q: &str| r[k][q].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "tournament server (2 workers, fresh SQLite), {} keep-alive clients:",
+            r["clients"]
+        );
+        println!(
+            "  matches       {:>9.0} matches/h (20 rallies, scripted built-ins)",
+            r["matches_per_hour_20_rallies"]
+                .as_f64()
+                .unwrap_or(f64::NAN)
+        );
+        println!("  while {} matches run:", r["matches_running_during_load"]);
+        for k in ["leaderboard", "healthz"] {
+            println!(
+                "  {k:<12}  {:>9.0} req/s   p50 {:.2} ms   p99 {:.2} ms",
+                f(k, "requests_per_second"),
+                f(k, "p50_ms"),
+                f(k, "p99_ms")
+            );
+        }
+        println!(
+            "  leaderboard / healthz throughput {:.2}",
+            r["leaderboard_vs_healthz_throughput"]
+                .as_f64()
+                .unwrap_or(f64::NAN)
+        );
+        println!(
+            "  server memory: peak RSS {:.1} MiB",
+            r["server_peak_rss_mib"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    Ok(())
+}
+
+/// `rally bench ball`: ball-world steps per second, with MuJoCo's beside them on `--mujoco`.
+fn bench_ball(args: &BenchArgs) -> Result<(), CliError> {
+    let mujoco = if args.mujoco {
+        Some(mujoco_steps_per_second(&args.python, args.seconds)?)
+    } else {
+        None
+    };
+    let (ours, steps) = ball_steps_per_second(args.seconds);
+    let ratio = mujoco.as_ref().map(|(m, _)| ours / m);
+    if args.json {
+        println!(
+            "{}",
+            json!({
+                "target": "ball",
+                "steps_per_second": ours,
+                "steps": steps,
+                "mujoco_steps_per_second": mujoco.as_ref().map(|m| m.0),
+                "mujoco_version": mujoco.as_ref().map(|m| m.1.clone()),
+                "ratio_vs_mujoco": ratio,
+            })
+        );
+    } else {
+        println!("ball world (ball, table, net, one moving paddle), single thread:");
+        println!("  muscle-rally  {ours:>12.0} steps/s");
+        if let (Some((m, version)), Some(r)) = (&mujoco, ratio) {
+            println!("  MuJoCo {version:<6} {m:>12.0} steps/s  (ball-only reference scene, mj_step nstep)");
+            println!("  ratio         {r:>12.1}x");
+        }
+    }
+    Ok(())
+}
+
+/// `rally bench agents`: evaluation episodes and match rallies per second.
+fn bench_agents(args: &BenchArgs) -> Result<(), CliError> {
+    let (model, config, _) = robot::bench_model(&args.model)?;
+    let (eps, rps, rally_s) = agent_rates(args.seconds, model, config)?;
+    if args.json {
+        println!(
+            "{}",
+            json!({"target": "agents", "model": args.model, "episodes_per_second": eps, "rallies_per_second": rps, "simulated_seconds_per_rally": rally_s})
+        );
+    } else {
+        println!("scripted agent, model {}, one core:", args.model);
+        println!("  evaluation    {eps:>8.1} single-serve episodes/s (P2)");
+        println!("  match         {rps:>8.1} rallies/s (scripted vs scripted, {rally_s:.2} simulated s per rally)");
+    }
+    Ok(())
+}
+
+/// `rally bench robot`: musculoskeletal steps per second and their split by stage.
+fn bench_robot(args: &BenchArgs) -> Result<(), CliError> {
+    let r = robot::measure(
+        &args.model,
+        args.seconds,
+        args.mujoco.then_some(args.python.as_path()),
+    )?;
+    if args.json {
+        println!("{r}");
+    } else {
+        robot::print(&r);
+    }
+    Ok(())
 }

@@ -8,32 +8,35 @@
 //! every environment, so the state saved there (weights, Adam, normaliser, statistics) is all a
 //! resumed run needs to continue as the same run, bit for bit.
 //!
-//! By part: this file (the trainer, its rollout and update), [`progress`] (statistics, curve,
-//! validations), `envs` (the environments a run steps), `outputs` (validation, checkpoints, the bank).
+//! By part: this file (the trainer, advantages and update), `rollout` (the rollout and the
+//! environments' running episodes), [`progress`] (statistics, curve, validations), `envs` (the
+//! environments a run steps), `outputs` (validation, checkpoints, the bank).
 
 mod envs;
 mod outputs;
 pub mod progress;
+mod rollout;
 
 use envs::*;
 pub use progress::*;
+use rollout::{Rollout, Running, Slot};
 
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Instant;
 
-use candle_core::{Device, Tensor};
+use candle_core::{Device, Tensor, Var};
 use rayon::prelude::*;
 use sim::config::ArenaConfig;
 use sim::model::Model;
 use sim::rng::Rng;
 
 use super::adam::{clip_grad_norm, Adam};
-use super::gae::{gae, normalise, StepEnd};
+use super::gae::{gae, normalise, Advantages};
 use super::loss;
 use super::normalizer::RunningNormalizer;
 use super::policy::ActorCritic;
-use super::{stream_seed, Method, Schedule, TrainConfig};
+use super::{stream_seed, Method, PpoConfig, Schedule, TrainConfig};
 use crate::controller::ControllerSpec;
 
 /// Episodes the rolling training statistics are taken over.
@@ -45,31 +48,6 @@ const STREAM_EPISODE: u64 = 2;
 const STREAM_NOISE: u64 = 3;
 const STREAM_MINIBATCH: u64 = 4;
 const STREAM_BANK: u64 = 5;
-
-/// One robot's running episode.
-#[derive(Debug, Clone, Copy, Default)]
-struct Running {
-    reward: f64,
-    steps: u32,
-    activation: f64,
-    dual: f64,
-}
-
-/// An environment and its running episode.
-struct Slot {
-    env: TrainingEnv,
-    /// Episodes begun in this segment.
-    episode: u64,
-    running: Vec<Running>,
-}
-
-/// What one robot's step gave the rollout.
-struct StepOut {
-    reward: f32,
-    end: StepEnd,
-    finished: Option<EpisodeStat>,
-    tracking: Option<f64>,
-}
 
 /// A PPO run in progress.
 pub struct Trainer {
@@ -245,173 +223,57 @@ impl Trainer {
         out
     }
 
-    /// One iteration: rollout, update, statistics. Returns the iteration's curve row.
+    /// One iteration: rollout, advantages, update, statistics. Returns the iteration's curve row.
     pub fn iterate(&mut self) -> Result<CurveRow, String> {
         let started = Instant::now();
-        let p = self.config.ppo.clone();
         if self
             .progress
             .iteration
-            .is_multiple_of(p.checkpoint_every as u64)
+            .is_multiple_of(self.config.ppo.checkpoint_every as u64)
         {
             self.begin_segment();
         }
-        // Rows: every robot of every environment (one per environment in the single serve).
-        let (n_env, d, a_dim, t_len) = (
-            p.envs * self.agents,
-            self.obs_dim,
-            self.act_dim,
-            p.steps_per_env,
-        );
-        let agents = self.agents;
-        let n = n_env * t_len;
-        let mut obs_buf: Vec<f32> = Vec::with_capacity(n * d);
-        let mut act_buf: Vec<f32> = Vec::with_capacity(n * a_dim);
-        let mut mu_buf: Vec<f32> = Vec::with_capacity(n * a_dim);
-        let mut logp_buf: Vec<f32> = Vec::with_capacity(n);
-        let mut val_buf: Vec<f32> = Vec::with_capacity(n);
-        let mut rew_buf: Vec<f32> = Vec::with_capacity(n);
-        let mut end_buf: Vec<StepEnd> = Vec::with_capacity(n);
-        let mut noise = Rng::seeded(stream_seed(
-            self.seed,
-            STREAM_NOISE,
-            self.progress.iteration,
-            0,
-        ));
-        let std: Vec<f32> = self.net.std().map_err(e)?;
         let log_std = self.net.log_std.as_tensor().detach();
-        let mut tracking = Vec::new();
-        let segment_start =
-            self.progress.iteration - self.progress.iteration % p.checkpoint_every as u64;
-        let (seed, scale) = (self.seed, p.reward_scale as f32);
-        for _ in 0..t_len {
-            let t0 = Instant::now();
-            let raw = self.observations();
-            self.normalizer.update(&raw);
-            let obs = self.normalised(&raw);
-            let x = Self::tensor(obs.clone(), n_env, d)?;
-            let mean = self.net.mean(&x).map_err(e)?.detach();
-            let value = self.net.value(&x).map_err(e)?.to_vec1::<f32>().map_err(e)?;
-            let mean_v: Vec<f32> = mean.flatten_all().map_err(e)?.to_vec1().map_err(e)?;
-            let actions: Vec<f32> = mean_v
-                .iter()
-                .enumerate()
-                .map(|(i, &m)| m + std[i % a_dim] * noise.normal() as f32)
-                .collect();
-            let at = Self::tensor(actions.clone(), n_env, a_dim)?;
-            let logp = loss::log_prob(&at, &mean, &log_std)
-                .and_then(|l| l.to_vec1::<f32>())
-                .map_err(e)?;
-            self.timing.policy += t0.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let outs: Vec<StepOut> = self
-                .slots
-                .par_iter_mut()
-                .zip(actions.par_chunks(a_dim * agents))
-                .enumerate()
-                .flat_map_iter(|(k, (slot, a))| {
-                    let rows: Vec<Vec<f64>> = a
-                        .chunks(a_dim)
-                        .map(|r| r.iter().map(|&x| (x as f64).clamp(-1.0, 1.0)).collect())
-                        .collect();
-                    let steps = slot.env.step(&rows);
-                    let done = steps.iter().any(|s| s.done);
-                    let outs: Vec<StepOut> = steps
-                        .iter()
-                        .zip(slot.running.iter_mut())
-                        .map(|(st, run)| {
-                            run.activation += st.activation;
-                            run.reward += st.reward;
-                            run.dual += st.dual;
-                            run.steps += 1;
-                            let end = if !done {
-                                StepEnd::Running
-                            } else if st.time_limit {
-                                StepEnd::TimeLimit
-                            } else {
-                                StepEnd::Terminal
-                            };
-                            StepOut {
-                                reward: st.reward as f32 * scale,
-                                end,
-                                finished: done.then(|| EpisodeStat {
-                                    reward: run.reward,
-                                    steps: run.steps,
-                                    hit: st.hit,
-                                    success: st.success,
-                                    mean_activation: run.activation / run.steps.max(1) as f64,
-                                    rally_length: st.rally_length,
-                                    dual: run.dual,
-                                }),
-                                tracking: st.tracking,
-                            }
-                        })
-                        .collect();
-                    if done {
-                        slot.episode += 1;
-                        slot.env.reset(stream_seed(
-                            seed,
-                            STREAM_EPISODE,
-                            segment_start,
-                            ((k as u64) << 32) | slot.episode,
-                        ));
-                        slot.running.fill(Running::default());
-                    }
-                    outs
-                })
-                .collect();
-            self.timing.simulation += t1.elapsed().as_secs_f64();
-            obs_buf.extend(obs);
-            act_buf.extend(actions);
-            mu_buf.extend(mean_v);
-            logp_buf.extend(logp);
-            val_buf.extend(value);
-            for o in outs {
-                rew_buf.push(o.reward);
-                end_buf.push(o.end);
-                tracking.extend(o.tracking);
-                if let Some(stat) = o.finished {
-                    self.progress.episodes += 1;
-                    self.progress.recent.push_back(stat);
-                    if self.progress.recent.len() > RECENT_EPISODES {
-                        self.progress.recent.pop_front();
-                    }
-                }
-            }
-        }
+        let rollout = self.collect(&log_std)?;
         let t2 = Instant::now();
+        let adv = self.advantages(&rollout)?;
+        let losses = self.update(&rollout, &adv, &log_std)?;
+        self.timing.update += t2.elapsed().as_secs_f64();
+        let n = rollout.len() as u64;
+        self.timing.env_steps += n;
+        self.progress.iteration += 1;
+        self.progress.env_steps += n;
+        self.progress.wall_s += started.elapsed().as_secs_f64();
+        let row = self.curve_row(&losses, rollout.tracking)?;
+        self.progress.curve.push(row);
+        Ok(row)
+    }
+
+    /// GAE over the rollout, bootstrapped from the critic's values of the observations after it.
+    fn advantages(&self, rollout: &Rollout) -> Result<Advantages, String> {
+        let p = &self.config.ppo;
         let last_obs = self.normalised(&self.observations());
         let last_values = self
             .net
-            .value(&Self::tensor(last_obs, n_env, d)?)
+            .value(&Self::tensor(last_obs, p.envs * self.agents, self.obs_dim)?)
             .and_then(|v| v.to_vec1::<f32>())
             .map_err(e)?;
-        let adv = gae(
-            &rew_buf,
-            &val_buf,
-            &end_buf,
+        Ok(gae(
+            &rollout.rewards,
+            &rollout.values,
+            &rollout.ends,
             &last_values,
             p.gamma as f32,
             p.lambda as f32,
-        );
-        let losses = self.update(
-            &obs_buf,
-            &act_buf,
-            &mu_buf,
-            &logp_buf,
-            &val_buf,
-            &adv.advantages,
-            &adv.returns,
-            &log_std,
-        )?;
-        self.timing.update += t2.elapsed().as_secs_f64();
-        self.timing.env_steps += n as u64;
-        self.progress.iteration += 1;
-        self.progress.env_steps += n as u64;
-        self.progress.wall_s += started.elapsed().as_secs_f64();
+        ))
+    }
+
+    /// The curve row of the iteration just done: the rolling episode statistics, the mean of the
+    /// rollout's `tracking` terms, the update's `losses` and the policy's noise now.
+    fn curve_row(&self, losses: &Losses, tracking: Vec<f64>) -> Result<CurveRow, String> {
         let recent = &self.progress.recent;
         let std_now = self.net.std().map_err(e)?;
-        let row = CurveRow {
+        Ok(CurveRow {
             iteration: self.progress.iteration,
             env_steps: self.progress.env_steps,
             wall_s: self.progress.wall_s,
@@ -430,26 +292,19 @@ impl Trainer {
             std: mean_of(std_now.iter().map(|&s| s as f64)),
             rally_length: mean_of(recent.iter().map(|s| s.rally_length as f64)),
             dual: mean_of(recent.iter().map(|s| s.dual)),
-        };
-        self.progress.curve.push(row);
-        Ok(row)
+        })
     }
 
-    #[allow(clippy::too_many_arguments)]
+    /// PPO's update: `epochs` passes over the rollout in shuffled minibatches (the minibatch
+    /// stream of the iteration), one Adam step each. Returns the means of the losses.
     fn update(
         &mut self,
-        obs: &[f32],
-        actions: &[f32],
-        old_mu: &[f32],
-        old_logp: &[f32],
-        old_values: &[f32],
-        advantages: &[f32],
-        returns: &[f32],
+        rollout: &Rollout,
+        adv: &Advantages,
         old_log_std: &Tensor,
     ) -> Result<Losses, String> {
         let p = self.config.ppo.clone();
-        let (d, a_dim) = (self.obs_dim, self.act_dim);
-        let n = old_logp.len();
+        let n = rollout.len();
         let mb = n / p.minibatches;
         let mut rng = Rng::seeded(stream_seed(
             self.seed,
@@ -468,60 +323,12 @@ impl Trainer {
                 order.swap(i, j.min(i));
             }
             for k in 0..p.minibatches {
-                let idx = &order[k * mb..(k + 1) * mb];
-                let gather = |src: &[f32], w: usize| -> Vec<f32> {
-                    idx.iter()
-                        .flat_map(|&i| src[i * w..(i + 1) * w].iter().copied())
-                        .collect()
-                };
-                let obs_b = Self::tensor(gather(obs, d), mb, d)?;
-                let act_b = Self::tensor(gather(actions, a_dim), mb, a_dim)?;
-                let mu_old = Self::tensor(gather(old_mu, a_dim), mb, a_dim)?;
-                let logp_old =
-                    Tensor::from_vec(gather(old_logp, 1), mb, &Device::Cpu).map_err(e)?;
-                let v_old = Tensor::from_vec(gather(old_values, 1), mb, &Device::Cpu).map_err(e)?;
-                let ret = Tensor::from_vec(gather(returns, 1), mb, &Device::Cpu).map_err(e)?;
-                let mut adv_b = gather(advantages, 1);
-                normalise(&mut adv_b);
-                let adv_t = Tensor::from_vec(adv_b, mb, &Device::Cpu).map_err(e)?;
-                let mu = self.net.mean(&obs_b).map_err(e)?;
-                let log_std = self.net.log_std.as_tensor();
-                let kl = loss::gaussian_kl(&mu_old, old_log_std, &mu.detach(), &log_std.detach())
-                    .and_then(|k| k.to_scalar::<f32>())
-                    .map_err(e)? as f64;
-                if p.schedule == Schedule::Adaptive {
-                    if kl > 2.0 * p.desired_kl {
-                        self.adam.lr = (self.adam.lr / 1.5).max(1e-5);
-                    } else if kl < p.desired_kl / 2.0 && kl > 0.0 {
-                        self.adam.lr = (self.adam.lr * 1.5).min(1e-2);
-                    }
-                }
-                let logp = loss::log_prob(&act_b, &mu, log_std).map_err(e)?;
-                let values = self.net.value(&obs_b).map_err(e)?;
-                let surrogate =
-                    loss::surrogate_loss(&logp, &logp_old, &adv_t, p.clip).map_err(e)?;
-                let value = loss::value_loss(&values, &v_old, &ret, p.clip).map_err(e)?;
-                let entropy = loss::entropy(log_std).map_err(e)?;
-                let mut total = (&surrogate + (&value * p.value_coef).map_err(e)?)
-                    .and_then(|t| t - (&entropy * p.entropy_coef)?)
-                    .map_err(e)?;
-                if p.bound_coef > 0.0 {
-                    let bound = loss::bound_loss(&mu, p.bound).map_err(e)?;
-                    total = (total + (bound * p.bound_coef).map_err(e)?).map_err(e)?;
-                }
-                let mut grads = total.backward().map_err(e)?;
-                clip_grad_norm(&mut grads, &vars, p.max_grad_norm).map_err(e)?;
-                self.adam.step(&grads).map_err(e)?;
-                if let Some(cap) = p.std_cap(self.progress.env_steps) {
-                    let ls = &self.net.log_std;
-                    let capped = ls.as_tensor().clamp(f32::MIN, cap.ln() as f32).map_err(e)?;
-                    ls.set(&capped).map_err(e)?;
-                }
-                let f = |t: &Tensor| t.to_scalar::<f32>().map(|x| x as f64).map_err(e);
-                sums.kl += kl;
-                sums.surrogate += f(&surrogate)?;
-                sums.value += f(&value)?;
-                sums.entropy += f(&entropy)?;
+                let batch = self.minibatch(rollout, adv, &order[k * mb..(k + 1) * mb])?;
+                let losses = self.step_on(&batch, old_log_std, &vars, &p)?;
+                sums.kl += losses.kl;
+                sums.surrogate += losses.surrogate;
+                sums.value += losses.value;
+                sums.entropy += losses.entropy;
                 count += 1.0;
             }
         }
@@ -532,6 +339,102 @@ impl Trainer {
             entropy: sums.entropy / count,
         })
     }
+
+    /// The rows `idx` of the rollout as tensors, their advantages normalised.
+    fn minibatch(
+        &self,
+        rollout: &Rollout,
+        adv: &Advantages,
+        idx: &[usize],
+    ) -> Result<Minibatch, String> {
+        let (d, a_dim, mb) = (self.obs_dim, self.act_dim, idx.len());
+        let gather = |src: &[f32], w: usize| -> Vec<f32> {
+            idx.iter()
+                .flat_map(|&i| src[i * w..(i + 1) * w].iter().copied())
+                .collect()
+        };
+        let column = |v: Vec<f32>| Tensor::from_vec(v, mb, &Device::Cpu).map_err(e);
+        let obs = Self::tensor(gather(&rollout.obs, d), mb, d)?;
+        let actions = Self::tensor(gather(&rollout.actions, a_dim), mb, a_dim)?;
+        let old_means = Self::tensor(gather(&rollout.means, a_dim), mb, a_dim)?;
+        let old_logp = column(gather(&rollout.logp, 1))?;
+        let old_values = column(gather(&rollout.values, 1))?;
+        let returns = column(gather(&adv.returns, 1))?;
+        let mut advantages = gather(&adv.advantages, 1);
+        normalise(&mut advantages);
+        Ok(Minibatch {
+            obs,
+            actions,
+            old_means,
+            old_logp,
+            old_values,
+            returns,
+            advantages: column(advantages)?,
+        })
+    }
+
+    /// One Adam step on a minibatch (after the adaptive schedule has looked at its KL), then the
+    /// cap on the policy's noise. Returns the minibatch's losses.
+    fn step_on(
+        &mut self,
+        b: &Minibatch,
+        old_log_std: &Tensor,
+        vars: &[Var],
+        p: &PpoConfig,
+    ) -> Result<Losses, String> {
+        let mu = self.net.mean(&b.obs).map_err(e)?;
+        let log_std = self.net.log_std.as_tensor();
+        let kl = loss::gaussian_kl(&b.old_means, old_log_std, &mu.detach(), &log_std.detach())
+            .and_then(|k| k.to_scalar::<f32>())
+            .map_err(e)? as f64;
+        if p.schedule == Schedule::Adaptive {
+            if kl > 2.0 * p.desired_kl {
+                self.adam.lr = (self.adam.lr / 1.5).max(1e-5);
+            } else if kl < p.desired_kl / 2.0 && kl > 0.0 {
+                self.adam.lr = (self.adam.lr * 1.5).min(1e-2);
+            }
+        }
+        let logp = loss::log_prob(&b.actions, &mu, log_std).map_err(e)?;
+        let values = self.net.value(&b.obs).map_err(e)?;
+        let surrogate =
+            loss::surrogate_loss(&logp, &b.old_logp, &b.advantages, p.clip).map_err(e)?;
+        let value = loss::value_loss(&values, &b.old_values, &b.returns, p.clip).map_err(e)?;
+        let entropy = loss::entropy(log_std).map_err(e)?;
+        let mut total = (&surrogate + (&value * p.value_coef).map_err(e)?)
+            .and_then(|t| t - (&entropy * p.entropy_coef)?)
+            .map_err(e)?;
+        if p.bound_coef > 0.0 {
+            let bound = loss::bound_loss(&mu, p.bound).map_err(e)?;
+            total = (total + (bound * p.bound_coef).map_err(e)?).map_err(e)?;
+        }
+        let mut grads = total.backward().map_err(e)?;
+        clip_grad_norm(&mut grads, vars, p.max_grad_norm).map_err(e)?;
+        self.adam.step(&grads).map_err(e)?;
+        if let Some(cap) = p.std_cap(self.progress.env_steps) {
+            let ls = &self.net.log_std;
+            let capped = ls.as_tensor().clamp(f32::MIN, cap.ln() as f32).map_err(e)?;
+            ls.set(&capped).map_err(e)?;
+        }
+        let f = |t: &Tensor| t.to_scalar::<f32>().map(|x| x as f64).map_err(e);
+        Ok(Losses {
+            kl,
+            surrogate: f(&surrogate)?,
+            value: f(&value)?,
+            entropy: f(&entropy)?,
+        })
+    }
+}
+
+/// A minibatch of the rollout: its rows, what the policy and critic gave them, their targets.
+struct Minibatch {
+    obs: Tensor,
+    actions: Tensor,
+    old_means: Tensor,
+    old_logp: Tensor,
+    old_values: Tensor,
+    returns: Tensor,
+    /// Normalised over the minibatch.
+    advantages: Tensor,
 }
 
 /// Means over an update's minibatches.

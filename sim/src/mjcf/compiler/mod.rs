@@ -367,109 +367,19 @@ impl Compiler {
 
 pub(super) fn compile(root: &Elem) -> Result<Model> {
     root.check_attrs(&["model"])?;
-    let mut c = Compiler {
-        degrees: true,
-        autolimits: true,
-        defaults: HashMap::new(),
-        model: Model {
-            name: root.attr("model").unwrap_or("").to_string(),
-            timestep: 0.002,
-            gravity: V3::new(0.0, 0.0, -9.81),
-            bodies: vec![Body {
-                name: "world".into(),
-                parent: None,
-                pos: V3::zeros(),
-                quat: UnitQuaternion::identity(),
-                mass: 0.0,
-                com: V3::zeros(),
-                inertia: Matrix3::zeros(),
-                first_joint: 0,
-                joint_count: 0,
-                source: String::new(),
-            }],
-            joints: vec![],
-            sites: vec![],
-            geoms: vec![],
-            tendons: vec![],
-            actuators: vec![],
-            couplings: vec![],
-            keyframes: vec![],
-            nq: 0,
-            nv: 0,
-            qpos0: vec![],
-            dof_joint: vec![],
-            dof_body: vec![],
-            dof_parent: vec![],
-        },
-        body_has_inertial: vec![true],
-    };
+    let mut c = Compiler::new(root.attr("model").unwrap_or(""));
     // Settings first, wherever they appear.
     for e in &root.children {
         match e.name.as_str() {
-            "compiler" => {
-                e.check_attrs(&["angle", "autolimits", "eulerseq", "inertiafromgeom"])?;
-                let a = Attrs {
-                    elem: e,
-                    defaults: None,
-                };
-                c.degrees = a.choice(
-                    "angle",
-                    &["degree", "radian"],
-                    if c.degrees { "degree" } else { "radian" },
-                )? == "degree";
-                c.autolimits = a.choice("autolimits", &["true", "false"], "true")? == "true";
-                a.choice("eulerseq", &["xyz"], "xyz")?;
-                a.choice("inertiafromgeom", &["auto"], "auto")?;
-            }
-            "option" => {
-                e.check_attrs(&["timestep", "gravity", "integrator"])?;
-                let a = Attrs {
-                    elem: e,
-                    defaults: None,
-                };
-                a.choice("integrator", &["Euler"], "Euler")?;
-                if let Some(ts) = a.f64("timestep")? {
-                    if ts <= 0.0 {
-                        return Err(e.src.err("<option> timestep must be positive"));
-                    }
-                    c.model.timestep = ts;
-                }
-                if let Some(g) = a.arr::<3>("gravity")? {
-                    c.model.gravity = V3::from(g);
-                }
-                if let Some(child) = e.children.first() {
-                    return Err(child.unsupported("option"));
-                }
-            }
-            "default" => {
-                let mut defaults = HashMap::new();
-                collect_defaults(e, &ClassDefaults::default(), &mut defaults, true)?;
-                for (k, v) in defaults {
-                    if c.defaults.insert(k.clone(), v).is_some() {
-                        return Err(e.src.err(format!("default class '{k}' is defined twice")));
-                    }
-                }
-            }
+            "compiler" => c.compiler_settings(e)?,
+            "option" => c.option(e)?,
+            "default" => c.default_classes(e)?,
             "worldbody" | "tendon" | "actuator" | "equality" | "keyframe" => {}
             _ => return Err(e.unsupported("mujoco")),
         }
     }
     for e in root.children.iter().filter(|e| e.name == "worldbody") {
-        e.check_attrs(&[])?;
-        // As MuJoCo orders them: the world's own geoms and sites first, then the bodies.
-        let mut placed = Vec::new();
-        c.unwrap_frames(&e.children, Frame::IDENTITY, None, &mut placed)?;
-        for p in &placed {
-            match p.elem.name.as_str() {
-                "body" => {}
-                "geom" => c.geom(p.elem, 0, p.childclass, p.frame)?,
-                "site" => c.site(p.elem, 0, p.childclass, p.frame)?,
-                _ => return Err(p.elem.unsupported("worldbody")),
-            }
-        }
-        for p in placed.iter().filter(|p| p.elem.name == "body") {
-            c.body(p.elem, 0, p.childclass, p.frame)?;
-        }
+        c.worldbody(e)?;
     }
     c.finish_inertia()?;
     c.finish_dofs();
@@ -485,4 +395,119 @@ pub(super) fn compile(root: &Elem) -> Result<Model> {
     let mut model = c.model;
     crate::kinematics::fill_lengthranges(&mut model);
     Ok(model)
+}
+
+impl Compiler {
+    /// A compiler at MuJoCo's settings, with the world body alone.
+    fn new(name: &str) -> Compiler {
+        Compiler {
+            degrees: true,
+            autolimits: true,
+            defaults: HashMap::new(),
+            model: Model {
+                name: name.to_string(),
+                timestep: 0.002,
+                gravity: V3::new(0.0, 0.0, -9.81),
+                bodies: vec![Body {
+                    name: "world".into(),
+                    parent: None,
+                    pos: V3::zeros(),
+                    quat: UnitQuaternion::identity(),
+                    mass: 0.0,
+                    com: V3::zeros(),
+                    inertia: Matrix3::zeros(),
+                    first_joint: 0,
+                    joint_count: 0,
+                    source: String::new(),
+                }],
+                joints: vec![],
+                sites: vec![],
+                geoms: vec![],
+                tendons: vec![],
+                actuators: vec![],
+                couplings: vec![],
+                keyframes: vec![],
+                nq: 0,
+                nv: 0,
+                qpos0: vec![],
+                dof_joint: vec![],
+                dof_body: vec![],
+                dof_parent: vec![],
+            },
+            body_has_inertial: vec![true],
+        }
+    }
+
+    /// `<compiler>`: angles in degrees or radians, automatic limits.
+    fn compiler_settings(&mut self, e: &Elem) -> Result<()> {
+        e.check_attrs(&["angle", "autolimits", "eulerseq", "inertiafromgeom"])?;
+        let a = Attrs {
+            elem: e,
+            defaults: None,
+        };
+        self.degrees = a.choice(
+            "angle",
+            &["degree", "radian"],
+            if self.degrees { "degree" } else { "radian" },
+        )? == "degree";
+        self.autolimits = a.choice("autolimits", &["true", "false"], "true")? == "true";
+        a.choice("eulerseq", &["xyz"], "xyz")?;
+        a.choice("inertiafromgeom", &["auto"], "auto")?;
+        Ok(())
+    }
+
+    /// `<option>`: the timestep and gravity (Euler integration only).
+    fn option(&mut self, e: &Elem) -> Result<()> {
+        e.check_attrs(&["timestep", "gravity", "integrator"])?;
+        let a = Attrs {
+            elem: e,
+            defaults: None,
+        };
+        a.choice("integrator", &["Euler"], "Euler")?;
+        if let Some(ts) = a.f64("timestep")? {
+            if ts <= 0.0 {
+                return Err(e.src.err("<option> timestep must be positive"));
+            }
+            self.model.timestep = ts;
+        }
+        if let Some(g) = a.arr::<3>("gravity")? {
+            self.model.gravity = V3::from(g);
+        }
+        if let Some(child) = e.children.first() {
+            return Err(child.unsupported("option"));
+        }
+        Ok(())
+    }
+
+    /// `<default>`: the default classes, each defined once.
+    fn default_classes(&mut self, e: &Elem) -> Result<()> {
+        let mut defaults = HashMap::new();
+        collect_defaults(e, &ClassDefaults::default(), &mut defaults, true)?;
+        for (k, v) in defaults {
+            if self.defaults.insert(k.clone(), v).is_some() {
+                return Err(e.src.err(format!("default class '{k}' is defined twice")));
+            }
+        }
+        Ok(())
+    }
+
+    /// `<worldbody>`: the world's own geoms and sites, then its bodies.
+    fn worldbody(&mut self, e: &Elem) -> Result<()> {
+        e.check_attrs(&[])?;
+        // As MuJoCo orders them: the world's own geoms and sites first, then the bodies.
+        let mut placed = Vec::new();
+        self.unwrap_frames(&e.children, Frame::IDENTITY, None, &mut placed)?;
+        for p in &placed {
+            match p.elem.name.as_str() {
+                "body" => {}
+                "geom" => self.geom(p.elem, 0, p.childclass, p.frame)?,
+                "site" => self.site(p.elem, 0, p.childclass, p.frame)?,
+                _ => return Err(p.elem.unsupported("worldbody")),
+            }
+        }
+        for p in placed.iter().filter(|p| p.elem.name == "body") {
+            self.body(p.elem, 0, p.childclass, p.frame)?;
+        }
+        Ok(())
+    }
 }
