@@ -10,15 +10,16 @@ use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use axum::{Json, Router};
-use serde_json::{json, Value};
+use serde_json::Value;
 
 use crate::db;
-use crate::ratings;
 use crate::state::{AppState, Budget};
 use wire::AgentRef;
 
 mod agents;
 mod contests;
+mod error;
+mod info;
 mod matches;
 mod tokens;
 mod workers;
@@ -29,173 +30,12 @@ use contests::{
     cancel_sprt, cancel_tournament, create_sprt, create_tournament, get_agent_crossings,
     get_rating_history, get_sprt, get_tournament, list_sprts, list_tournaments,
 };
+pub use error::ApiError;
+use error::{limit_of, parse_id, ApiResult, Typed};
+use info::*;
 use matches::*;
 use tokens::*;
 use workers::*;
-
-/// A rejected request.
-#[derive(Debug)]
-pub struct ApiError {
-    status: StatusCode,
-    code: &'static str,
-    message: String,
-    field: Option<std::borrow::Cow<'static, str>>,
-    retry_after: Option<u64>,
-}
-
-impl ApiError {
-    pub(crate) fn new(
-        status: StatusCode,
-        code: &'static str,
-        message: impl Into<String>,
-    ) -> ApiError {
-        ApiError {
-            status,
-            code,
-            message: message.into(),
-            field: None,
-            retry_after: None,
-        }
-    }
-
-    fn bad(field: &'static str, message: impl Into<String>) -> ApiError {
-        ApiError {
-            field: Some(field.into()),
-            ..ApiError::new(StatusCode::BAD_REQUEST, "invalid_field", message)
-        }
-    }
-
-    fn name_taken(what: &str, name: &str) -> ApiError {
-        ApiError {
-            field: Some("name".into()),
-            ..ApiError::new(
-                StatusCode::CONFLICT,
-                "name_taken",
-                format!("{what} named '{name}' exists"),
-            )
-        }
-    }
-
-    fn not_cancellable(message: String) -> ApiError {
-        ApiError::new(StatusCode::CONFLICT, "not_cancellable", message)
-    }
-
-    fn not_found(what: &str, id: i64) -> ApiError {
-        ApiError::new(
-            StatusCode::NOT_FOUND,
-            "not_found",
-            format!("no {what} with id {id}"),
-        )
-    }
-}
-
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
-        let body = wire::ErrorBody {
-            error: wire::ErrorDetail {
-                code: self.code.to_string(),
-                message: self.message,
-                field: self.field.map(|f| f.into_owned()),
-            },
-        };
-        let mut r = (self.status, Json(body)).into_response();
-        if let Some(secs) = self.retry_after {
-            r.headers_mut()
-                .insert(header::RETRY_AFTER, header::HeaderValue::from(secs));
-        }
-        r
-    }
-}
-
-impl From<sqlx::Error> for ApiError {
-    fn from(e: sqlx::Error) -> ApiError {
-        tracing::error!(error = %e, "database error");
-        ApiError::new(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "database",
-            "database error (see the server log)",
-        )
-    }
-}
-
-impl From<anyhow::Error> for ApiError {
-    fn from(e: anyhow::Error) -> ApiError {
-        tracing::error!(error = %e, "internal error");
-        ApiError::new(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "internal",
-            "internal error (see the server log)",
-        )
-    }
-}
-
-impl From<JsonRejection> for ApiError {
-    fn from(r: JsonRejection) -> ApiError {
-        let code = match &r {
-            JsonRejection::MissingJsonContentType(_) => "content_type",
-            JsonRejection::JsonSyntaxError(_) => "malformed_json",
-            JsonRejection::JsonDataError(_) => "invalid_body",
-            _ => "bad_body",
-        };
-        ApiError::new(r.status(), code, r.body_text())
-    }
-}
-
-type ApiResult<T> = Result<T, ApiError>;
-
-fn parse_id(raw: &str, what: &'static str) -> ApiResult<i64> {
-    raw.parse::<i64>()
-        .ok()
-        .filter(|&id| id > 0)
-        .ok_or_else(|| ApiError::bad(what, format!("'{raw}' is not a positive integer id")))
-}
-
-/// A query string as `T` (one of `wire`'s queries): an unknown parameter or a value of the wrong
-/// kind is a 400 naming the parameter.
-struct Typed<T>(T);
-
-impl<S: Send + Sync, T: serde::de::DeserializeOwned> axum::extract::FromRequestParts<S>
-    for Typed<T>
-{
-    type Rejection = ApiError;
-
-    async fn from_request_parts(
-        parts: &mut axum::http::request::Parts,
-        _: &S,
-    ) -> Result<Typed<T>, ApiError> {
-        let raw = parts.uri.query().unwrap_or("");
-        let de = serde_urlencoded::Deserializer::new(form_urlencoded::parse(raw.as_bytes()));
-        serde_path_to_error::deserialize(de)
-            .map(Typed)
-            .map_err(|e| {
-                let path = e.path().to_string();
-                let message = match path.as_str() {
-                    "." => format!("query: {}", e.inner()),
-                    p => format!("query parameter '{p}': {}", e.inner()),
-                };
-                ApiError {
-                    field: Some(if path == "." {
-                        "query".into()
-                    } else {
-                        path.into()
-                    }),
-                    ..ApiError::new(StatusCode::BAD_REQUEST, "invalid_field", message)
-                }
-            })
-    }
-}
-
-/// `?limit=`: from 1 to `max`, `default` when absent.
-fn limit_of(limit: Option<i64>, default: i64, max: i64) -> ApiResult<i64> {
-    match limit {
-        None => Ok(default),
-        Some(l) if (1..=max).contains(&l) => Ok(l),
-        Some(l) => Err(ApiError::bad(
-            "limit",
-            format!("limit must be an integer from 1 to {max}, not {l}"),
-        )),
-    }
-}
 
 /// The router: API, page, limits, compression.
 pub fn router(state: AppState) -> Router {
@@ -299,19 +139,6 @@ async fn method_not_allowed(method: axum::http::Method) -> ApiError {
     )
 }
 
-async fn healthz(State(s): State<AppState>) -> ApiResult<Json<wire::Health>> {
-    db::ping(&s.pool).await?;
-    Ok(Json(wire::Health {
-        status: "ok".into(),
-        sim_version: sim::SIM_VERSION.into(),
-        qualification: Some(wire::QualificationRule {
-            episodes: s.settings.qualification_episodes,
-            min_hit_rate: s.settings.qualification_min_hit_rate,
-            max_dropped: s.settings.qualification_max_dropped,
-        }),
-    }))
-}
-
 /// `GET /events`: server-sent events, one JSON `ServerEvent` per change (matches queued, started,
 /// finished, failed, cancelled; agents registered), with a keep-alive comment every 15 s. A
 /// subscriber that falls more than `EVENT_BUFFER` events behind gets an event `lagged` (refresh
@@ -333,68 +160,6 @@ async fn events(
         Some((Ok(event), rx))
     });
     Sse::new(stream).keep_alive(KeepAlive::new().interval(std::time::Duration::from_secs(15)))
-}
-
-/// `GET /arena`: the arena's geometry as the simulator has it (table, net, floor, hitting planes, serve
-/// box, ball, the default robot's paddle), so that pages draw what the simulator simulates.
-async fn arena(State(s): State<AppState>) -> Json<Value> {
-    use sim::arena as a;
-    let paddle = s
-        .model
-        .body("paddle")
-        .and_then(|b| sim::geometry::PaddleShape::from_model(&s.model, b).ok())
-        .unwrap_or_else(sim::geometry::PaddleShape::standard);
-    let cyl = |c: &sim::geometry::Cylinder| {
-        let axis = ["x", "y", "z"][c.axis];
-        json!({"center": [c.center.x, c.center.y, c.center.z], "axis": axis,
-               "radius": c.radius, "half_length": c.half_length})
-    };
-    Json(json!({
-        "sim_version": sim::SIM_VERSION,
-        "table": {"x": [-a::TABLE_HALF_LENGTH, a::TABLE_HALF_LENGTH], "y": [a::TABLE_Y_MIN, a::TABLE_Y_MAX],
-                  "center_y": a::TABLE_CENTER_Y, "top_z": a::TABLE_TOP_Z},
-        "net": {"center": a::NET_CENTER, "half_size": a::NET_HALF_SIZE, "top_z": a::NET_TOP_Z},
-        "floor_z": a::FLOOR_Z,
-        "strike_plane_x": a::STRIKE_PLANE_X,
-        "serve_box": {"z": [a::SERVE_BOX_Z.0, a::SERVE_BOX_Z.1], "half_width": a::SERVE_BOX_HALF_WIDTH},
-        "ball_radius": a::BALL_RADIUS,
-        "paddle": {"blade": cyl(&paddle.blade), "handle": cyl(&paddle.handle)},
-    }))
-}
-
-/// `GET /model`: what a page needs to draw the robots — bodies (name, parent; `paddle` is drawn from
-/// the frames' paddle pose instead), every geom in its body's frame (kind, size, pos, quat w x y z),
-/// the sites and every muscle's path through them (the actuator index that colours it).
-async fn robot_model(State(s): State<AppState>) -> Json<Value> {
-    let m = &s.model;
-    let q = |q: &nalgebra::UnitQuaternion<f64>| json!([q.w, q.i, q.j, q.k]);
-    let v = |p: &nalgebra::Vector3<f64>| json!([p.x, p.y, p.z]);
-    let kind = |k: sim::model::GeomKind| match k {
-        sim::model::GeomKind::Sphere => "sphere",
-        sim::model::GeomKind::Capsule => "capsule",
-        sim::model::GeomKind::Cylinder => "cylinder",
-        sim::model::GeomKind::Box => "box",
-        sim::model::GeomKind::Ellipsoid => "ellipsoid",
-        sim::model::GeomKind::Plane => "plane",
-    };
-    let muscles: Vec<Value> = m
-        .muscles()
-        .filter_map(|(a, act)| match act.transmission {
-            sim::model::Transmission::Tendon(t) => {
-                Some(json!({"name": act.name, "actuator": a, "sites": m.tendons[t].sites().collect::<Vec<_>>()}))
-            }
-            _ => None,
-        })
-        .collect();
-    Json(json!({
-        "name": m.name,
-        "paddle_body": m.body("paddle"),
-        "bodies": m.bodies.iter().map(|b| json!({"name": b.name, "parent": b.parent})).collect::<Vec<_>>(),
-        "geoms": m.geoms.iter().map(|g| json!({"body": g.body, "name": g.name, "kind": kind(g.kind),
-            "size": g.size, "pos": v(&g.pos), "quat": q(&g.quat)})).collect::<Vec<_>>(),
-        "sites": m.sites.iter().map(|st| json!({"body": st.body, "pos": v(&st.pos)})).collect::<Vec<_>>(),
-        "muscles": muscles,
-    }))
 }
 
 /// Who made a request.
@@ -586,61 +351,4 @@ fn seed_or_clock(seed: Option<u64>) -> ApiResult<u64> {
             .unwrap_or_default();
         (t.as_nanos() as u64) & (i64::MAX as u64)
     }))
-}
-
-async fn leaderboard(State(s): State<AppState>) -> ApiResult<Json<ratings::Leaderboard>> {
-    Ok(Json((*crate::board::current_board(&s).await?).clone()))
-}
-
-async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {
-    let by_status: Vec<(String, i64)> = db::matches_by_status(&s.pool).await?;
-    let (agents_n, rallies_n): (i64, i64) = db::agent_and_rally_counts(&s.pool).await?;
-    let mut out = String::new();
-    out.push_str("# HELP rally_matches Matches by status.\n# TYPE rally_matches gauge\n");
-    for st in ["queued", "running", "done", "failed", "cancelled"] {
-        let n = by_status.iter().find(|(k, _)| k == st).map_or(0, |x| x.1);
-        out.push_str(&format!("rally_matches{{status=\"{st}\"}} {n}\n"));
-    }
-    out.push_str(&format!("# HELP rally_agents Registered agents.\n# TYPE rally_agents gauge\nrally_agents {agents_n}\n"));
-    out.push_str(&format!("# HELP rally_rallies_total Rallies stored.\n# TYPE rally_rallies_total counter\nrally_rallies_total {rallies_n}\n"));
-    let tallies = db::contest_tallies(&s.pool).await?;
-    out.push_str("# HELP rally_sprts SPRTs by status.\n# TYPE rally_sprts gauge\n");
-    for st in [
-        "running",
-        "accepted_h1",
-        "accepted_h0",
-        "inconclusive",
-        "failed",
-        "cancelled",
-    ] {
-        let key = format!("sprt_{st}");
-        let n = tallies.iter().find(|(k, _)| *k == key).map_or(0, |x| x.1);
-        out.push_str(&format!("rally_sprts{{status=\"{st}\"}} {n}\n"));
-    }
-    let t = tallies
-        .iter()
-        .find(|(k, _)| k == "tournaments")
-        .map_or(0, |x| x.1);
-    out.push_str(&format!("# HELP rally_tournaments Tournaments created.\n# TYPE rally_tournaments counter\nrally_tournaments {t}\n"));
-    out.push_str(&format!(
-        "# HELP rally_workers Match workers.\n# TYPE rally_workers gauge\nrally_workers {}\n",
-        s.settings.workers
-    ));
-    let (setups, setup_s) = s.players.setups();
-    out.push_str(&format!(
-        "# HELP rally_match_setup_seconds From a match's claim to its first frame, in this process.\n# TYPE rally_match_setup_seconds summary\nrally_match_setup_seconds_sum {setup_s}\nrally_match_setup_seconds_count {setups}\n"
-    ));
-    out.push_str(&format!(
-        "# HELP rally_player_loads_total Checkpoints parsed and built for matches and replays in this process.\n# TYPE rally_player_loads_total counter\nrally_player_loads_total {}\n",
-        s.players.loads()
-    ));
-    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response())
-}
-
-async fn openapi() -> Response {
-    (
-        [(header::CONTENT_TYPE, "application/json")],
-        crate::page::OPENAPI,
-    )
-        .into_response()
 }

@@ -190,6 +190,31 @@ pub async fn store_result(
         .bind(&lease.worker)
         .execute(&mut *tx)
         .await?;
+    store_drift(&mut tx, id, [agent_a, agent_b], r).await?;
+    store_ratings(&mut tx, id, [agent_a, agent_b], r.points).await?;
+    store_rallies(&mut tx, id, r).await?;
+    for (rally, blob) in frames {
+        sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES ($1, $2, $3)")
+            .bind(id)
+            .bind(rally)
+            .bind(blob)
+            .execute(&mut *tx)
+            .await?;
+    }
+    if let Some(sprt) = sprt_id {
+        sprt_step(&mut tx, sprt).await?;
+    }
+    tx.commit().await?;
+    Ok(Stored::Done)
+}
+
+/// Each side's drift over the match (inside the match's transaction).
+async fn store_drift(
+    conn: &mut sqlx::AnyConnection,
+    id: i64,
+    [agent_a, agent_b]: [i64; 2],
+    r: &MatchRecord,
+) -> sqlx::Result<()> {
     for (side, agent, d) in [
         ("A", agent_a, &r.drift_by_player[0]),
         ("B", agent_b, &r.drift_by_player[1]),
@@ -207,27 +232,45 @@ pub async fn store_result(
             // statement prepared (and cached) with that type then refuses the next real f64
             // ("incorrect binary data format"): statements that may bind a None f64 are not cached.
             .persistent(false)
-            .execute(&mut *tx)
+            .execute(&mut *conn)
             .await?;
     }
-    // Glicko-2, online: both sides' last ratings in, `domain::rating_update` decides.
+    Ok(())
+}
+
+/// Both sides' Glicko-2 after the match, from their last ratings: `domain::rating_update` decides.
+async fn store_ratings(
+    conn: &mut sqlx::AnyConnection,
+    id: i64,
+    [agent_a, agent_b]: [i64; 2],
+    points: [u32; 2],
+) -> sqlx::Result<()> {
     let last = |agent: i64| {
         sqlx::query_as::<_, (f64, f64, f64)>("SELECT rating, deviation, volatility FROM rating_history WHERE agent_id = $1 ORDER BY seq DESC LIMIT 1").bind(agent)
     };
     let prior = [
-        last(agent_a).fetch_optional(&mut *tx).await?,
-        last(agent_b).fetch_optional(&mut *tx).await?,
+        last(agent_a).fetch_optional(&mut *conn).await?,
+        last(agent_b).fetch_optional(&mut *conn).await?,
     ];
-    for (agent, g) in crate::domain::rating_update([agent_a, agent_b], prior, r.points) {
+    for (agent, g) in crate::domain::rating_update([agent_a, agent_b], prior, points) {
         sqlx::query("INSERT INTO rating_history (match_id, agent_id, rating, deviation, volatility) VALUES ($1, $2, $3, $4, $5)")
             .bind(id)
             .bind(agent)
             .bind(g.0)
             .bind(g.1)
             .bind(g.2)
-            .execute(&mut *tx)
+            .execute(&mut *conn)
             .await?;
     }
+    Ok(())
+}
+
+/// The match's rallies and their crossings.
+async fn store_rallies(
+    conn: &mut sqlx::AnyConnection,
+    id: i64,
+    r: &MatchRecord,
+) -> sqlx::Result<()> {
     for rally in &r.rallies {
         sqlx::query("INSERT INTO rallies (match_id, idx, server, length, end_reason, failing_side, duration) VALUES ($1, $2, $3, $4, $5, $6, $7)")
             .bind(id)
@@ -237,7 +280,7 @@ pub async fn store_result(
             .bind(rally.end)
             .bind(rally.failing_side)
             .bind(rally.duration)
-            .execute(&mut *tx)
+            .execute(&mut *conn)
             .await?;
         for (seq, c) in rally.crossings.iter().enumerate() {
             sqlx::query("INSERT INTO crossings (match_id, rally_idx, seq, receiver, exchange, y_r, z, in_box, extrapolated) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)")
@@ -250,23 +293,11 @@ pub async fn store_result(
                 .bind(c.z)
                 .bind(c.in_box as i64)
                 .bind(c.extrapolated as i64)
-                .execute(&mut *tx)
+                .execute(&mut *conn)
                 .await?;
         }
     }
-    for (rally, blob) in frames {
-        sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES ($1, $2, $3)")
-            .bind(id)
-            .bind(rally)
-            .bind(blob)
-            .execute(&mut *tx)
-            .await?;
-    }
-    if let Some(sprt) = sprt_id {
-        sprt_step(&mut tx, sprt).await?;
-    }
-    tx.commit().await?;
-    Ok(Stored::Done)
+    Ok(())
 }
 
 /// Why a worker's write under its lease matched no row: the match was cancelled, or the lease lost.
