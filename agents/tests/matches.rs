@@ -100,39 +100,38 @@ fn a_live_listener_hears_every_replay_frame_as_it_is_recorded_then_the_rally() {
     let build = |p: &PlayerSpec| p.build(&s.model, &s.preset, 0).unwrap();
     let mut heard: Vec<Vec<String>> = vec![Vec::new()];
     let mut ends = Vec::new();
-    let (record, replay) = play_match_with(
-        &s,
-        [build(&a), build(&b)],
-        [a.name(), b.name()],
-        &mut |e| match e {
-            MatchEvent::Frame { rally, frame } => {
-                assert_eq!(
-                    rally as usize,
-                    heard.len() - 1,
-                    "frames of the rally being played"
-                );
-                heard
-                    .last_mut()
-                    .unwrap()
-                    .push(serde_json::to_string(frame).unwrap());
+    let (record, replay) =
+        play_match_with(&s, [build(&a), build(&b)], [a.name(), b.name()], &mut |e| {
+            match e {
+                MatchEvent::Frame { rally, frame } => {
+                    assert_eq!(
+                        rally as usize,
+                        heard.len() - 1,
+                        "frames of the rally being played"
+                    );
+                    heard
+                        .last_mut()
+                        .unwrap()
+                        .push(serde_json::to_string(frame).unwrap());
+                }
+                MatchEvent::Rally {
+                    rally,
+                    record,
+                    frames,
+                } => {
+                    let got = heard.last().unwrap();
+                    assert_eq!(
+                        got.len(),
+                        frames.len(),
+                        "rally {rally}: every frame heard before its end"
+                    );
+                    ends.push((rally, record.length));
+                    heard.push(Vec::new());
+                }
             }
-            MatchEvent::Rally {
-                rally,
-                record,
-                frames,
-            } => {
-                let got = heard.last().unwrap();
-                assert_eq!(
-                    got.len(),
-                    frames.len(),
-                    "rally {rally}: every frame heard before its end"
-                );
-                ends.push((rally, record.length));
-                heard.push(Vec::new());
-            }
-        },
-    )
-    .unwrap();
+            std::ops::ControlFlow::Continue(())
+        })
+        .unwrap();
     heard.pop();
     let stored: Vec<Vec<String>> = replay
         .iter()
@@ -165,7 +164,7 @@ fn a_player_producing_nan_loses_with_invalid_action_and_nothing_crashes() {
         &s,
         [good, Box::new(Nan)],
         ["scripted".into(), "nan".into()],
-        &mut |_| {},
+        &mut |_| std::ops::ControlFlow::Continue(()),
     )
     .unwrap();
     for rally in &r.rallies {
@@ -252,4 +251,31 @@ fn recorded_returns_are_the_legal_returns_struck_towards_a() {
     )
     .unwrap();
     assert_eq!(bank, balls, "the bank file keeps every bit");
+}
+
+#[test]
+fn a_break_stops_the_match_at_the_end_of_the_rally() {
+    let a = PlayerSpec::scripted("scripted").unwrap();
+    let s = spec(5, 7, false);
+    let build = |p: &PlayerSpec| p.build(&s.model, &s.preset, 0).unwrap();
+    let mut ended = Vec::new();
+    let stopped = play_match_with(
+        &s,
+        [build(&a), build(&a)],
+        [a.name(), a.name()],
+        &mut |e| match e {
+            MatchEvent::Rally { rally, .. } => {
+                ended.push(rally);
+                if rally == 1 {
+                    std::ops::ControlFlow::Break(())
+                } else {
+                    std::ops::ControlFlow::Continue(())
+                }
+            }
+            MatchEvent::Frame { .. } => std::ops::ControlFlow::Continue(()),
+        },
+    )
+    .unwrap_err();
+    assert_eq!(ended, [0, 1]);
+    assert_eq!(stopped, "stopped after 2 of 5 rallies");
 }

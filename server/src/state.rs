@@ -45,6 +45,10 @@ pub struct AppState {
     pub resim: Arc<tokio::sync::Semaphore>,
     /// The agents' built players, shared by the workers and the re-simulations.
     pub players: Arc<crate::players::PlayerCache>,
+    /// The matches this process plays, each with the flag that stops it at the end of its rally
+    /// (set when it is cancelled: here by the API, or seen by the heartbeat).
+    pub playing:
+        Arc<std::sync::Mutex<std::collections::HashMap<i64, Arc<std::sync::atomic::AtomicBool>>>>,
 }
 
 /// The budgets a submitter token spends.
@@ -69,6 +73,16 @@ impl AppState {
             id,
             status: Some(status),
         });
+    }
+
+    /// Stops match `id` at the end of its rally if this process plays it (it was cancelled); whether
+    /// it did.
+    pub fn stop_playing(&self, id: i64) -> bool {
+        let flag = self.playing.lock().ok().and_then(|p| p.get(&id).cloned());
+        if let Some(f) = &flag {
+            f.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+        flag.is_some()
     }
 
     /// Publishes that agent `id` was registered (see [`AppState::publish_match`]).
@@ -114,5 +128,6 @@ pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
         live: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),
         players,
+        playing: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
     })
 }

@@ -7,6 +7,7 @@ mod drift;
 
 pub use drift::*;
 
+use std::ops::ControlFlow;
 use std::sync::Arc;
 
 use serde::Serialize;
@@ -177,6 +178,7 @@ pub fn play_match(
         if let MatchEvent::Rally { rally, .. } = e {
             progress(rally)
         }
+        ControlFlow::Continue(())
     })
 }
 
@@ -202,24 +204,27 @@ pub enum MatchEvent<'a> {
 }
 
 /// [`play_match`] with players already built (named for the record); `on_event` hears of every
-/// replay frame as it is recorded and of every rally as it ends.
+/// replay frame as it is recorded and of every rally as it ends. A `Break` from it stops the match
+/// at the end of the rally being played (its worker is free for the next match): an error that
+/// says after how many rallies.
 pub fn play_match_with(
     spec: &MatchSpec,
     mut players: [Box<dyn Player>; 2],
     names: [String; 2],
-    on_event: &mut dyn FnMut(MatchEvent<'_>),
+    on_event: &mut dyn FnMut(MatchEvent<'_>) -> ControlFlow<()>,
 ) -> Result<(MatchRecord, Replay), String> {
     let mut rally = Rally::new(spec.model.clone(), &spec.config, spec.preset)?;
     let mut records = Vec::new();
     let mut replay: Replay = Vec::new();
     let mut points = [0u32; 2];
     for k in 0..spec.rallies {
+        let mut stop = false;
         let (record, frames, loser) = play_rally(
             &mut rally,
             &mut players,
             spec,
             k,
-            &mut |frame| on_event(MatchEvent::Frame { rally: k, frame }),
+            &mut |frame| stop |= on_event(MatchEvent::Frame { rally: k, frame }).is_break(),
             &mut |_, _| {},
         );
         if let Some(loser) = loser {
@@ -228,11 +233,19 @@ pub fn play_match_with(
                 Side::B => 0,
             }] += 1;
         }
-        on_event(MatchEvent::Rally {
+        stop |= on_event(MatchEvent::Rally {
             rally: k,
             record: &record,
             frames: &frames,
-        });
+        })
+        .is_break();
+        if stop {
+            return Err(format!(
+                "stopped after {} of {} rallies",
+                k + 1,
+                spec.rallies
+            ));
+        }
         records.push(record);
         replay.push(frames);
     }

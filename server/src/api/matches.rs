@@ -182,6 +182,9 @@ pub(super) async fn cancel_match(
             m.status
         )));
     }
+    // Played here, it stops at the end of its rally; played by another process, that process's
+    // heartbeat sees the cancellation.
+    s.stop_playing(id);
     s.publish_match(id, db::MatchStatus::Cancelled);
     let m = db::match_row(&s.pool, id)
         .await?

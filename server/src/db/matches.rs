@@ -167,7 +167,8 @@ pub async fn store_result(
     .bind(r.points[1] as i64)
     .bind(r.mean_rally_length)
     .bind(r.max_rally_length as i64)
-    .bind(r.drift.in_box_fraction)
+    // A share of no crossings is none, not 0 (it would weigh as a miss in every average).
+    .bind((r.drift.crossings > 0).then_some(r.drift.in_box_fraction))
     .bind(r.drift.energy_distance)
     .bind(r.drift.drift_slope)
     .bind(serde_json::to_string(&r.drift).unwrap_or_default())
@@ -224,6 +225,7 @@ async fn store_drift(
             .bind(side)
             .bind(agent)
             .bind(d.crossings as i64)
+            // Weighed by its crossings wherever it is averaged: with none it counts for nothing.
             .bind(d.in_box_fraction)
             .bind(d.energy_distance)
             .bind(d.drift_slope)

@@ -323,4 +323,46 @@ mod tests {
         assert!(played.contains(&("new".into(), 1)) && played.contains(&("old".into(), 0)));
         pool.close().await;
     }
+
+    #[tokio::test]
+    async fn a_match_without_crossings_stores_no_in_box_share() {
+        let pool = db::test_store("no_crossings").await;
+        db::register_builtins(&pool).await.unwrap();
+        let all = db::agents(&pool).await.unwrap();
+        let id = db::queue_match(&pool, &all[0], &all[1], 1, 3, false, db::Origin::default())
+            .await
+            .unwrap();
+        register(&pool, "w", "h", 1, 1, 60_000).await.unwrap();
+        let (_, lease) = claim(&pool, "w", 60_000).await.unwrap().unwrap();
+        let spec = agents::matchrun::MatchSpec {
+            model: std::sync::Arc::new(
+                sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "m.xml").unwrap(),
+            ),
+            config: sim::config::ArenaConfig::default(),
+            preset: sim::arena::MYOCHALLENGE,
+            rallies: 1,
+            seed: 3,
+            replay: false,
+        };
+        let scripted = agents::factory::PlayerSpec::scripted("scripted").unwrap();
+        let (mut record, replay) =
+            agents::matchrun::play_match(&spec, &scripted, &scripted, &mut |_| {}).unwrap();
+        // As a match whose balls never crossed a hitting plane has it.
+        record.drift.crossings = 0;
+        record.drift.in_box_fraction = 0.0;
+        for d in record.drift_by_player.iter_mut() {
+            d.crossings = 0;
+            d.in_box_fraction = 0.0;
+        }
+        for rally in record.rallies.iter_mut() {
+            rally.crossings.clear();
+        }
+        let stored = db::store_result(&pool, &lease, &record, &replay).await;
+        assert_eq!(stored.unwrap(), Stored::Done);
+        let m = db::match_row(&pool, id).await.unwrap().unwrap();
+        assert_eq!(m.in_box_fraction, None, "none, not 0");
+        let drift = db::agent_drift_summary(&pool, all[0].id).await.unwrap();
+        assert_eq!((drift.crossings, drift.in_box_fraction), (0, None));
+        pool.close().await;
+    }
 }

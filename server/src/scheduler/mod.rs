@@ -11,8 +11,9 @@
 //! its leases run out, the next claim (by any worker) queues its matches again, and a result it
 //! reports after that is refused. Results are written only with the `done` mark, under the current
 //! claim, so no match is lost and none is stored twice. SIGTERM finishes the matches being played,
-//! stores them and marks the worker stopped. A match cancelled while running is played out and its
-//! result discarded.
+//! stores them and marks the worker stopped. A match cancelled while running stops at the end of the
+//! rally being played (at once when this process's API cancelled it, else at the next heartbeat),
+//! stores nothing, and frees its worker.
 //!
 //! Continuous mode (`rally serve` only, [`spawn_background`]): when the queue is empty the server
 //! queues a match for the agent whose rating interval is widest (no interval counts as widest),
@@ -43,6 +44,27 @@ use tokio::task::JoinHandle;
 
 use crate::db;
 use crate::state::AppState;
+
+/// Stops the matches this process plays that were cancelled meanwhile (by any process: a match,
+/// its tournament or its SPRT), at the end of their rallies.
+async fn stop_cancelled(state: &AppState) {
+    let ids: Vec<i64> = match state.playing.lock() {
+        Ok(p) => p.keys().copied().collect(),
+        Err(_) => return,
+    };
+    for id in ids {
+        if let Ok(Some((db::MatchStatus::Cancelled, _))) =
+            db::workers::status_of(&state.pool, id).await
+        {
+            if state.stop_playing(id) {
+                tracing::info!(
+                    id,
+                    "cancelled while playing: stopped at the end of its rally"
+                );
+            }
+        }
+    }
+}
 
 /// This process's match workers: `settings.workers` tasks and the heartbeat that renews their leases.
 pub struct Workers {
@@ -94,6 +116,7 @@ impl Workers {
                     {
                         tracing::warn!(worker = %state.worker, error = %e, "heartbeat failed");
                     }
+                    stop_cancelled(&state).await;
                 }
             })
         };

@@ -1,5 +1,7 @@
 //! A match's lifecycle: its recipe, playing it (with the live feed), storing it, re-simulating a rally.
 
+use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -100,11 +102,18 @@ pub fn play(
         }
     };
     let mut first = true;
+    let stop = state
+        .playing
+        .lock()
+        .map_err(|_| "match registry poisoned".to_string())?
+        .get(&m.id)
+        .cloned();
     let (record, mut replay) =
         agents::matchrun::play_match_with(&spec, players, [a.name(), b.name()], &mut |e| {
             if std::mem::take(&mut first) {
                 state.players.record_setup(claimed.elapsed());
             }
+            let stopped = stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed));
             let watched = live.as_ref().filter(|tx| tx.receiver_count() > 0);
             match e {
                 MatchEvent::Frame { rally, frame } => {
@@ -112,7 +121,7 @@ pub fn play(
                     let Some(tx) = watched else {
                         // Nobody watches: keep nothing; a viewer who comes later starts here.
                         chunk.clear();
-                        return;
+                        return ControlFlow::Continue(());
                     };
                     chunk.push(frame.clone());
                     if chunk.len() >= crate::live::LIVE_CHUNK {
@@ -138,6 +147,11 @@ pub fn play(
                     chunk.clear();
                     recorded = 0;
                 }
+            }
+            if stopped {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
             }
         })?;
     if !m.keep_replay {
@@ -174,6 +188,9 @@ pub(super) async fn run_one(
     lease: db::Lease,
 ) -> anyhow::Result<()> {
     let claimed = std::time::Instant::now();
+    if let Ok(mut playing) = state.playing.lock() {
+        playing.insert(m.id, Arc::new(AtomicBool::new(false)));
+    }
     // The live channel first: the match is `running` from its claim on, so a viewer may ask for
     // its feed before the agents' specs are read (seen in CI: 409 while the specs were fetched).
     let id = m.id;
@@ -189,6 +206,9 @@ pub(super) async fn run_one(
         fn drop(&mut self) {
             if let Ok(mut live) = self.0.live.lock() {
                 live.remove(&self.1);
+            }
+            if let Ok(mut playing) = self.0.playing.lock() {
+                playing.remove(&self.1);
             }
         }
     }
@@ -246,7 +266,12 @@ pub(super) async fn run_one(
             (stored, db::MatchStatus::Done)
         }
         Ok(Err(e)) => {
-            tracing::warn!(id, error = %e, "match failed");
+            let stopped = state.playing.lock().ok().and_then(|p| p.get(&id).cloned());
+            if stopped.is_some_and(|s| s.load(Ordering::SeqCst)) {
+                tracing::info!(id, "cancelled while playing: {e}");
+            } else {
+                tracing::warn!(id, error = %e, "match failed");
+            }
             (
                 db::fail(&state.pool, &lease, &e).await?,
                 db::MatchStatus::Failed,
