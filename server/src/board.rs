@@ -29,6 +29,11 @@ pub async fn current_board(s: &AppState) -> anyhow::Result<Arc<ratings::Leaderbo
             .into_iter()
             .map(|(id, b, e)| (id, (b, e)))
             .collect(),
+        anchor: agents
+            .iter()
+            .find(|a| a.name.eq_ignore_ascii_case(&s.settings.rating_anchor))
+            .map(|a| (a.id, s.settings.rating_anchor_value)),
+        provisional_width: s.settings.provisional_interval,
     };
     let board = Arc::new(
         tokio::task::spawn_blocking(move || {

@@ -77,12 +77,65 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 }
 
 /// What the leaderboard takes from elsewhere than the match outcomes.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Extras {
     /// Each agent's latest Glicko-2 (rating, deviation) from the rating history.
     pub glicko: HashMap<i64, (f64, f64)>,
     /// Each agent's own drift over its matches: (mean in-box fraction, mean energy distance).
     pub drift: HashMap<i64, (Option<f64>, Option<f64>)>,
+    /// The reference agent and the rating it is held at: every rating (and every bootstrap
+    /// resample) is shifted so that it sits there, so agents that play on unchanged do not move
+    /// when others join. None (or an agent without a match against another): the fit's own scale.
+    pub anchor: Option<(i64, f64)>,
+    /// An agent whose 95% interval is wider than this (or that has none) is provisional: listed
+    /// after the established ones, whatever its rating.
+    pub provisional_width: f64,
+}
+
+impl Default for Extras {
+    fn default() -> Extras {
+        Extras {
+            glicko: HashMap::new(),
+            drift: HashMap::new(),
+            anchor: None,
+            provisional_width: f64::INFINITY,
+        }
+    }
+}
+
+/// Which agents are established: an interval no wider than `width`, and a rated match against the
+/// anchor or another established agent (the anchor is established; without one, the interval
+/// alone decides). Newcomers that only met each other stay provisional however narrow their
+/// intervals: nothing ties their ratings to the others'.
+fn established(
+    pairs: &[(usize, usize, f64, f64)],
+    intervals: &[(Option<f64>, Option<f64>)],
+    anchor: Option<usize>,
+    width: f64,
+) -> Vec<bool> {
+    let narrow: Vec<bool> = intervals
+        .iter()
+        .map(|iv| matches!(iv, (Some(low), Some(high)) if high - low <= width))
+        .collect();
+    let Some(anchor) = anchor else {
+        return narrow;
+    };
+    let mut known = vec![false; intervals.len()];
+    known[anchor] = true;
+    loop {
+        let mut grew = false;
+        for &(x, y, _, _) in pairs {
+            for (from, to) in [(x, y), (y, x)] {
+                if from != to && known[from] && !known[to] && narrow[to] {
+                    known[to] = true;
+                    grew = true;
+                }
+            }
+        }
+        if !grew {
+            return known;
+        }
+    }
 }
 
 /// Computes the leaderboard of `agents` from the finished matches.
@@ -104,6 +157,21 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
         }
         bradley_terry_from(&wins, start)
     };
+    // The anchor, if it has played another agent: the scale is shifted to hold it at its value.
+    let anchor = extras.anchor.and_then(|(id, value)| {
+        let i = index(id)?;
+        pairs
+            .iter()
+            .any(|p| p.0 != p.1 && (p.0 == i || p.1 == i))
+            .then_some((i, value))
+    });
+    let anchored = |mut r: Vec<f64>| {
+        if let Some((i, value)) = anchor {
+            let shift = value - r[i];
+            r.iter_mut().for_each(|x| *x += shift);
+        }
+        r
+    };
     let rating = fit(&mut pairs.iter(), None);
     let mut boot = vec![Vec::with_capacity(BOOTSTRAP); n];
     if !pairs.is_empty() {
@@ -112,12 +180,31 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
             let picks: Vec<usize> = (0..pairs.len())
                 .map(|_| (agents::seeds::splitmix64(&mut state) % pairs.len() as u64) as usize)
                 .collect();
-            let r = fit(&mut picks.iter().map(|&k| &pairs[k]), Some(&rating));
+            let r = anchored(fit(&mut picks.iter().map(|&k| &pairs[k]), Some(&rating)));
             for (i, x) in r.into_iter().enumerate() {
                 boot[i].push(x);
             }
         }
     }
+    let rating = anchored(rating);
+    // Matches against itself rate nothing: without another opponent there is no interval.
+    let intervals: Vec<(Option<f64>, Option<f64>)> = (0..n)
+        .map(|i| {
+            let rated = pairs.iter().any(|p| p.0 != p.1 && (p.0 == i || p.1 == i));
+            if !rated || boot[i].is_empty() {
+                return (None, None);
+            }
+            let mut s = boot[i].clone();
+            s.sort_by(f64::total_cmp);
+            (Some(percentile(&s, 0.025)), Some(percentile(&s, 0.975)))
+        })
+        .collect();
+    let established = established(
+        &pairs,
+        &intervals,
+        anchor.map(|a| a.0),
+        extras.provisional_width,
+    );
     let glicko = |id: i64| {
         extras
             .glicko
@@ -145,15 +232,8 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
             let rallies: i64 = mine.iter().map(|o| o.8).sum();
             let mean_rally_length = (rallies > 0)
                 .then(|| mine.iter().map(|o| o.4 * o.8 as f64).sum::<f64>() / rallies as f64);
-            // Matches against itself rate nothing: without another opponent there is no interval.
-            let rated = mine.iter().any(|o| o.0 != o.1);
-            let interval = if !rated || boot[i].is_empty() {
-                (None, None)
-            } else {
-                let mut s = boot[i].clone();
-                s.sort_by(f64::total_cmp);
-                (Some(percentile(&s, 0.025)), Some(percentile(&s, 0.975)))
-            };
+            let interval = intervals[i];
+            let provisional = !established[i];
             Row {
                 rank: 0,
                 agent_id: a.id,
@@ -162,6 +242,7 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
                 rating: rating[i],
                 rating_low: interval.0,
                 rating_high: interval.1,
+                provisional,
                 matches: mine.iter().filter(|o| o.0 != o.1).count(),
                 self_play_matches: mine.iter().filter(|o| o.0 == o.1).count(),
                 points_won_pct: (decided > 0).then(|| 100.0 * won as f64 / decided as f64),
@@ -176,9 +257,11 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
             }
         })
         .collect();
+    // The established first, then the provisional, each by rating.
     rows.sort_by(|x, y| {
-        y.rating
-            .total_cmp(&x.rating)
+        x.provisional
+            .cmp(&y.provisional)
+            .then(y.rating.total_cmp(&x.rating))
             .then(x.agent_id.cmp(&y.agent_id))
     });
     for (k, r) in rows.iter_mut().enumerate() {
@@ -186,6 +269,7 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
     }
     Leaderboard {
         matches: outcomes.len(),
+        anchor: anchor.map(|(i, value)| (agents[i].name.clone(), value)),
         rows,
     }
 }
@@ -378,5 +462,68 @@ mod tests {
             three.rating_low.is_none(),
             "no interval without a rated match: continuous mode still counts it most uncertain"
         );
+    }
+
+    /// Three established agents with many matches among them; then ten junk agents, as continuous
+    /// mode once paired them: only against each other, one sweeping the others 20–0 again and again.
+    #[test]
+    fn ten_junk_agents_barely_move_the_anchored_scale_and_rank_below_the_established() {
+        let entrant = |id: i64, name: &str| Entrant {
+            id,
+            name: name.into(),
+            builtin: id <= 3,
+            hit_rate: None,
+            success_rate: None,
+        };
+        let mut agents = vec![
+            entrant(1, "scripted"),
+            entrant(2, "kmac"),
+            entrant(3, "kmac-rally"),
+        ];
+        let outcome = |a: i64, b: i64, pa: i64, pb: i64| -> Outcome {
+            (a, b, pa, pb, 3.0, 9, Some(0.9), Some(0.1), pa + pb)
+        };
+        let mut outcomes = Vec::new();
+        for k in 0..40 {
+            outcomes.push(outcome(2, 1, 12 + k % 3, 8 - k % 3));
+            outcomes.push(outcome(3, 1, 13 - k % 2, 7 + k % 2));
+            outcomes.push(outcome(3, 2, 11, 9));
+        }
+        let extras = Extras {
+            anchor: Some((1, 1500.0)),
+            provisional_width: 200.0,
+            ..Extras::default()
+        };
+        let before = leaderboard(&agents, &outcomes, &extras);
+        assert_eq!(before.anchor, Some(("scripted".to_string(), 1500.0)));
+        assert!(before.rows.iter().all(|r| !r.provisional), "{before:?}");
+        let rating =
+            |b: &Leaderboard, id: i64| b.rows.iter().find(|r| r.agent_id == id).unwrap().clone();
+        assert_eq!(rating(&before, 1).rating, 1500.0);
+        for j in 0..10 {
+            agents.push(entrant(10 + j, &format!("junk-{j}")));
+        }
+        for _ in 0..3 {
+            for j in 1..10 {
+                outcomes.push(outcome(10, 10 + j, 20, 0));
+                outcomes.push(outcome(10 + j, 10 + (j % 9) + 1, 10, 10));
+            }
+        }
+        let after = leaderboard(&agents, &outcomes, &extras);
+        for id in 1..=3 {
+            let moved = (rating(&after, id).rating - rating(&before, id).rating).abs();
+            assert!(moved < 5.0, "agent {id} moved {moved:.1}");
+        }
+        let top = rating(&after, 3);
+        assert!(!top.provisional);
+        for j in 0..10 {
+            let junk = rating(&after, 10 + j);
+            assert!(junk.provisional, "{junk:?}");
+            assert!(junk.rank > top.rank, "{junk:?} above {top:?}");
+        }
+        // Unanchored and without the provisional rule, the sweeping junk agent rose above kmac-rally:
+        // what the two rules are for.
+        let loose = leaderboard(&agents, &outcomes, &Extras::default());
+        assert!(rating(&loose, 10).rating > rating(&loose, 3).rating);
     }
 }

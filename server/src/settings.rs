@@ -74,6 +74,14 @@ pub struct Settings {
     /// How long a shutdown (SIGTERM, Ctrl-C) waits for open HTTP connections (live streams, slow
     /// clients) before closing them, s. Running matches are finished and stored either way.
     pub shutdown_deadline_s: f64,
+    /// The reference agent the rating scale is anchored to (its name): its rating is held at
+    /// `rating_anchor_value`, so agents that play on unchanged do not move when others join.
+    pub rating_anchor: String,
+    /// The rating the reference agent is held at.
+    pub rating_anchor_value: f64,
+    /// An agent whose 95% rating interval is wider than this (Elo points) is provisional, listed
+    /// after the established agents; continuous mode pairs it with established ones first.
+    pub provisional_interval: f64,
     /// Agents whose built players (a checkpoint parsed, validated, its network built) a process
     /// keeps for its next matches, the least recently used leaving first; 0: none kept.
     pub player_cache: usize,

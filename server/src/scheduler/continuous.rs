@@ -1,4 +1,5 @@
-//! Continuous mode: which match to queue when the queue is empty.
+//! Continuous mode: which match to queue when the queue is empty: the agent whose rating is least
+//! certain, against the opponent it met least — an established one first if it is provisional.
 
 use crate::db;
 use crate::state::AppState;
@@ -33,14 +34,13 @@ pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     let board = crate::board::current_board(state)
         .await
         .map_err(|e| anyhow::anyhow!("computing the leaderboard: {e:?}"))?;
+    let row = |id: i64| board.rows.iter().find(|r| r.agent_id == id);
     let width = |id: i64| {
-        board
-            .rows
-            .iter()
-            .find(|r| r.agent_id == id)
+        row(id)
             .and_then(|r| Some(r.rating_high? - r.rating_low?))
             .unwrap_or(f64::INFINITY)
     };
+    let provisional = |id: i64| row(id).is_none_or(|r| r.provisional);
     // Matches being played count as met, and their agents are picked last: the leaderboard does
     // not know their results yet.
     let pending = db::running_pairs(&state.pool).await?;
@@ -59,12 +59,16 @@ pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
                 .then(q.id.cmp(&p.id))
         })
         .expect("two agents");
+    // A provisional agent meets the established first: its rating then says where it stands among
+    // them, not only among other newcomers.
+    let newcomer = provisional(first.id);
     let second = agents
         .iter()
         .filter(|o| o.id != first.id)
         .min_by(|p, q| {
-            met(first.id, p.id)
-                .cmp(&met(first.id, q.id))
+            (newcomer && provisional(p.id))
+                .cmp(&(newcomer && provisional(q.id)))
+                .then(met(first.id, p.id).cmp(&met(first.id, q.id)))
                 .then(p.id.cmp(&q.id))
         })
         .expect("two agents");

@@ -19,6 +19,10 @@ pub struct LeaderboardRow {
     pub rating_low: Option<f64>,
     /// Upper end.
     pub rating_high: Option<f64>,
+    /// Its interval is wider than the server's `provisional_interval` (or it has none): listed after
+    /// the established agents, whatever its rating.
+    #[serde(default)]
+    pub provisional: bool,
     /// Finished rated matches: against another agent (points won and the rating come from these).
     pub matches: usize,
     /// Finished cooperative matches against itself: they rate nothing and count in the rally
@@ -52,6 +56,9 @@ pub struct LeaderboardRow {
 pub struct Leaderboard {
     /// Finished matches it is computed from.
     pub matches: usize,
+    /// The reference agent the scale is anchored to, and its rating (none: the fit's own scale).
+    #[serde(default)]
+    pub anchor: Option<(String, f64)>,
     /// Rows, best first.
     pub rows: Vec<LeaderboardRow>,
 }
