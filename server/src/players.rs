@@ -46,7 +46,7 @@ impl PlayerCache {
             db::AgentKind::Scripted => return build(model, kind, spec),
             db::AgentKind::Checkpoint => db::spec_hash(spec),
         };
-        if let Some(found) = self.lookup(&key) {
+        if let Some(found) = self.lookup(kind, &key) {
             return Ok(found);
         }
         // Built outside the lock: another worker may build the same one meanwhile (both are the
@@ -61,8 +61,13 @@ impl PlayerCache {
         Ok(built)
     }
 
-    fn lookup(&self, key: &str) -> Option<PlayerSpec> {
-        self.entries.as_ref()?.lock().ok()?.get(key).cloned()
+    /// The kept recipe of the agent of `kind` whose spec's hash is `hash`, if it is kept (a
+    /// scripted agent's never is: its recipe is its name).
+    pub fn lookup(&self, kind: db::AgentKind, hash: &str) -> Option<PlayerSpec> {
+        match kind {
+            db::AgentKind::Scripted => None,
+            db::AgentKind::Checkpoint => self.entries.as_ref()?.lock().ok()?.get(hash).cloned(),
+        }
     }
 
     /// Checkpoints this process has parsed and built for matches and replays so far.

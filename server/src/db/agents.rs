@@ -67,6 +67,21 @@ pub async fn retire_agent(pool: &Pool, id: i64) -> sqlx::Result<bool> {
     Ok(done.rows_affected() == 1)
 }
 
+/// An agent's kind and spec hash (to find its player kept built, without reading its spec).
+pub async fn agent_kind_and_hash(
+    pool: &Pool,
+    id: i64,
+) -> sqlx::Result<Option<(AgentKind, String)>> {
+    let found: Option<(String, String)> =
+        sqlx::query_as("SELECT kind, spec_hash FROM agents WHERE id = $1")
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+    found
+        .map(|(kind, hash)| Ok((word(&kind, "kind")?, hash)))
+        .transpose()
+}
+
 /// An agent's kind and spec (for playing it).
 pub async fn agent_spec(pool: &Pool, id: i64) -> sqlx::Result<Option<(AgentKind, String)>> {
     let found: Option<(String, String)> =

@@ -177,6 +177,12 @@ pub fn resimulate_rally(
     agents::matchrun::replay_rally(&match_spec(state, m)?, &a, &b, k).map(|(_, frames)| frames)
 }
 
+/// A side of a match about to be played: its player from the cache, or the spec to build it from.
+enum Side {
+    Built(PlayerSpec),
+    Spec(db::AgentKind, String),
+}
+
 /// Whether the agents' specs are still the ones match `m` was queued with.
 fn specs_unchanged(m: &db::Match, spec_a: &str, spec_b: &str) -> bool {
     db::spec_hash(spec_a) == m.spec_hash_a && db::spec_hash(spec_b) == m.spec_hash_b
@@ -213,28 +219,40 @@ pub(super) async fn run_one(
         }
     }
     let _unregister = Unregister(state.clone(), id);
-    let spec_of = |id: i64| {
-        let state = state.clone();
-        async move {
-            db::agent_spec(&state.pool, id)
-                .await?
-                .ok_or_else(|| anyhow::anyhow!("agent {id} no longer exists"))
+    // Each side: its agent's stored hash must still be the match's, and its player comes from the
+    // cache by that hash; only a miss reads the spec (a checkpoint's JSON, ~1 MB) and builds it.
+    let mut sides = Vec::with_capacity(2);
+    for (agent, queued_with) in [(m.agent_a, &m.spec_hash_a), (m.agent_b, &m.spec_hash_b)] {
+        let (kind, hash) = db::agent_kind_and_hash(&state.pool, agent)
+            .await?
+            .ok_or_else(|| anyhow::anyhow!("agent {agent} no longer exists"))?;
+        if &hash != queued_with {
+            let error = "an agent's spec changed since the match was queued";
+            if db::fail(&state.pool, &lease, error).await? == db::Stored::Done {
+                state.publish_match(id, db::MatchStatus::Failed);
+            }
+            return Ok(());
         }
-    };
-    let (ka, sa) = spec_of(m.agent_a).await?;
-    let (kb, sb) = spec_of(m.agent_b).await?;
-    if !specs_unchanged(&m, &sa, &sb) {
-        let error = "an agent's spec changed since the match was queued";
-        if db::fail(&state.pool, &lease, error).await? == db::Stored::Done {
-            state.publish_match(id, db::MatchStatus::Failed);
-        }
-        return Ok(());
+        let side = match state.players.lookup(kind, &hash) {
+            Some(player) => Side::Built(player),
+            None => {
+                let (kind, spec) = db::agent_spec(&state.pool, agent)
+                    .await?
+                    .ok_or_else(|| anyhow::anyhow!("agent {agent} no longer exists"))?;
+                Side::Spec(kind, spec)
+            }
+        };
+        sides.push(side);
     }
     let st = state.clone();
     let started = std::time::Instant::now();
     let result = tokio::task::spawn_blocking(move || {
-        let a = player_spec(&st, ka, &sa)?;
-        let b = player_spec(&st, kb, &sb)?;
+        let mut built = sides.into_iter().map(|side| match side {
+            Side::Built(player) => Ok(player),
+            Side::Spec(kind, spec) => player_spec(&st, kind, &spec),
+        });
+        let a = built.next().ok_or("no side A")??;
+        let b = built.next().ok_or("no side B")??;
         play(&st, &m, &a, &b, claimed)
     })
     .await;

@@ -413,6 +413,17 @@ fn bench_server(args: &BenchArgs) -> Result<(), CliError> {
                 .as_f64()
                 .unwrap_or(f64::NAN)
         );
+        for (k, what) in [
+            ("uncached", "every match builds its players"),
+            ("cached", "the workers' player cache"),
+        ] {
+            let c = &r["checkpoints"][k];
+            println!(
+                "  matches       {:>9.0} matches/h (20 rallies, trained built-ins; {what}), setup {:.1} ms",
+                c["matches_per_hour"].as_f64().unwrap_or(f64::NAN),
+                c["setup_ms"].as_f64().unwrap_or(f64::NAN)
+            );
+        }
         println!("  while {} matches run:", r["matches_running_during_load"]);
         for k in ["leaderboard", "healthz"] {
             println!(
