@@ -37,45 +37,41 @@ mod tests {
         }
     }
 
-    /// The document's schemas name exactly the fields the API serialises.
+    /// Every JSON answer of the document has a schema, and the schemas are the `wire` types' own
+    /// (`RALLY_UPDATE_OPENAPI=1 cargo test -p server openapi` rewrites them from the types).
     #[test]
-    fn the_schemas_match_the_rows() {
-        let v: serde_json::Value = serde_json::from_str(super::OPENAPI).expect("valid JSON");
-        let keys = |schema: &str| {
-            let mut k: Vec<String> = v["components"]["schemas"][schema]["properties"]
-                .as_object()
-                .expect("properties")
-                .keys()
-                .cloned()
-                .collect();
-            k.sort();
-            k
-        };
-        let fields = |row: serde_json::Value| {
-            let mut k: Vec<String> = row
-                .as_object()
-                .expect("an object")
-                .keys()
-                .cloned()
-                .collect();
-            k.sort();
-            k
-        };
-        let m = crate::db::example_match(1, 1, 2);
-        assert_eq!(keys("Match"), fields(serde_json::to_value(m).unwrap()));
-        let a = crate::db::Agent {
-            id: 1,
-            name: String::new(),
-            kind: crate::db::AgentKind::Scripted,
-            spec_hash: String::new(),
-            builtin: true,
-            created_at: String::new(),
-            qual_episodes: None,
-            hit_rate: None,
-            success_rate: None,
-            effort: None,
-            retired_at: None,
-        };
-        assert_eq!(keys("Agent"), fields(serde_json::to_value(a).unwrap()));
+    fn every_answer_has_a_schema_and_the_schemas_are_the_wire_types() {
+        let mut v: serde_json::Value = serde_json::from_str(super::OPENAPI).expect("valid JSON");
+        let generated = wire::answer_schemas();
+        if std::env::var_os("RALLY_UPDATE_OPENAPI").is_some() {
+            let schemas = v["components"]["schemas"].as_object_mut().expect("schemas");
+            for (name, schema) in &generated {
+                schemas.insert(name.clone(), schema.clone());
+            }
+            let path = concat!(env!("CARGO_MANIFEST_DIR"), "/src/openapi.json");
+            let text = serde_json::to_string_pretty(&v).expect("JSON") + "\n";
+            std::fs::write(path, text).expect("openapi.json written");
+            return;
+        }
+        for (name, schema) in &generated {
+            assert_eq!(
+                &v["components"]["schemas"][name], schema,
+                "the schema of {name} is not the wire type's: RALLY_UPDATE_OPENAPI=1 rewrites it"
+            );
+        }
+        let mut missing = Vec::new();
+        for (path, ops) in v["paths"].as_object().expect("paths") {
+            for (method, op) in ops.as_object().expect("operations") {
+                for (code, answer) in op["responses"].as_object().expect("responses") {
+                    let described = answer["content"]
+                        .as_object()
+                        .is_some_and(|c| c.values().all(|m| m.get("schema").is_some()));
+                    if !described {
+                        missing.push(format!("{method} {path} {code}"));
+                    }
+                }
+            }
+        }
+        assert!(missing.is_empty(), "answers without a schema: {missing:?}");
     }
 }

@@ -269,7 +269,10 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
     }
     Leaderboard {
         matches: outcomes.len(),
-        anchor: anchor.map(|(i, value)| (agents[i].name.clone(), value)),
+        anchor: anchor.map(|(i, rating)| wire::Anchor {
+            agent: agents[i].name.clone(),
+            rating,
+        }),
         rows,
     }
 }
@@ -495,7 +498,8 @@ mod tests {
             ..Extras::default()
         };
         let before = leaderboard(&agents, &outcomes, &extras);
-        assert_eq!(before.anchor, Some(("scripted".to_string(), 1500.0)));
+        let anchor = before.anchor.clone().expect("anchored");
+        assert_eq!((anchor.agent.as_str(), anchor.rating), ("scripted", 1500.0));
         assert!(before.rows.iter().all(|r| !r.provisional), "{before:?}");
         let rating =
             |b: &Leaderboard, id: i64| b.rows.iter().find(|r| r.agent_id == id).unwrap().clone();

@@ -1,9 +1,10 @@
 //! The leaderboard as the API shows it (`GET /leaderboard`).
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// One leaderboard row.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct LeaderboardRow {
     /// 1-based rank by rating.
     pub rank: usize,
@@ -52,13 +53,22 @@ pub struct LeaderboardRow {
 }
 
 /// The leaderboard.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct Leaderboard {
     /// Finished matches it is computed from.
     pub matches: usize,
     /// The reference agent the scale is anchored to, and its rating (none: the fit's own scale).
     #[serde(default)]
-    pub anchor: Option<(String, f64)>,
+    pub anchor: Option<Anchor>,
     /// Rows, best first.
     pub rows: Vec<LeaderboardRow>,
+}
+
+/// The reference agent a rating scale is anchored to.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Anchor {
+    /// Its name.
+    pub agent: String,
+    /// The rating it is held at.
+    pub rating: f64,
 }

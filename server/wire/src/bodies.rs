@@ -5,6 +5,7 @@
 //! Requests refuse unknown fields. Responses are the store's rows (`Match`, `Agent`, …),
 //! flattened where the answer adds to a row.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
@@ -14,7 +15,7 @@ use crate::{
 };
 
 /// An agent in a request: its id or its name.
-#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
 pub enum AgentRef {
     /// By id.
@@ -36,7 +37,7 @@ impl From<i64> for AgentRef {
 }
 
 /// `POST /matches`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct QueueMatch {
     /// Side A.
@@ -51,7 +52,7 @@ pub struct QueueMatch {
 }
 
 /// `POST /tournaments`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewTournament {
     /// `round_robin` or `gauntlet`.
@@ -73,7 +74,7 @@ fn one() -> u32 {
 }
 
 /// `POST /sprt`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewSprt {
     /// The agent under test.
@@ -138,7 +139,7 @@ fn default_sprt_matches() -> u32 {
 }
 
 /// `POST /agents` (JSON; the multipart form has the same two fields).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SubmitAgent {
     /// Unique name.
@@ -148,7 +149,7 @@ pub struct SubmitAgent {
 }
 
 /// `POST /tokens`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewToken {
     /// The submitter's name.
@@ -156,14 +157,14 @@ pub struct NewToken {
 }
 
 /// Every 4xx and 5xx answer.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ErrorBody {
     /// What went wrong.
     pub error: ErrorDetail,
 }
 
 /// What went wrong, and where.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ErrorDetail {
     /// Machine-readable code (`bad_request`, `not_found`, `rate_limited`, …).
     pub code: String,
@@ -174,7 +175,7 @@ pub struct ErrorDetail {
 }
 
 /// `GET /healthz`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Health {
     /// `ok`.
     pub status: String,
@@ -187,7 +188,7 @@ pub struct Health {
 
 /// The admission rule: a submission plays `episodes` P2 serves (seed 0) and must hit at least
 /// `min_hit_rate` of them and drop its paddle in at most `max_dropped` of them.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct QualificationRule {
     /// Qualification episodes.
     pub episodes: usize,
@@ -198,14 +199,14 @@ pub struct QualificationRule {
 }
 
 /// `GET /agents`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct AgentList {
     /// Every agent, by id.
     pub agents: Vec<Agent>,
 }
 
 /// `GET /agents/{id}`: the row, its drift, its rally lengths and a trained checkpoint's provenance.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct AgentDetail {
     /// The row.
     #[serde(flatten)]
@@ -220,7 +221,7 @@ pub struct AgentDetail {
 }
 
 /// Rallies of one length.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub struct RallyCount {
     /// Returns in the rally.
     pub length: i64,
@@ -229,7 +230,7 @@ pub struct RallyCount {
 }
 
 /// `GET /agents/{id}/ratings`: its Glicko-2 history, one point per finished match.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct RatingHistory {
     /// The agent.
     pub agent_id: i64,
@@ -242,7 +243,7 @@ pub struct RatingHistory {
 }
 
 /// `GET /agents/{id}/crossings`: the crossings of the hitting plane it is answerable for.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct AgentCrossings {
     /// The agent.
     pub agent_id: i64,
@@ -257,7 +258,7 @@ pub struct AgentCrossings {
 }
 
 /// The serve box at the hitting plane (docs/design.md §7), m.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ServeBox {
     /// |y| at most.
     pub half_width: f64,
@@ -268,7 +269,7 @@ pub struct ServeBox {
 }
 
 /// `POST /agents` (201): the stored agent and the qualification it passed.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct Submitted {
     /// The new row.
     pub agent: Agent,
@@ -277,7 +278,7 @@ pub struct Submitted {
 }
 
 /// A value with its 95% interval.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Interval {
     /// The value.
     pub value: f64,
@@ -289,7 +290,7 @@ pub struct Interval {
 
 /// A qualification: the submitted agent's evaluation on single P2 serves (the report of `rally eval
 /// --json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Qualification {
     /// The agent's name.
     pub agent: String,
@@ -317,11 +318,12 @@ pub struct Qualification {
     #[serde(default)]
     pub after_contact_steps: Option<f64>,
     /// How many episodes ended each way (SUCCESS, the referee's reason, TIME_LIMIT).
+    #[schemars(with = "Vec<Vec<Value>>")]
     pub ends: Vec<(String, usize)>,
 }
 
 /// `POST /tokens` (201): the token, shown this once.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct IssuedToken {
     /// Token id.
     pub id: i64,
@@ -334,7 +336,7 @@ pub struct IssuedToken {
 }
 
 /// `GET /matches`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct MatchList {
     /// The page, newest first.
     pub matches: Vec<Match>,
@@ -343,7 +345,7 @@ pub struct MatchList {
 }
 
 /// One side's drift statistics in a match.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct SideDrift {
     /// `A` or `B`.
     pub side: String,
@@ -354,7 +356,7 @@ pub struct SideDrift {
 }
 
 /// `GET /matches/{id}`: the match row, its rallies and drift.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct MatchDetail {
     /// The row.
     #[serde(flatten)]
@@ -368,7 +370,7 @@ pub struct MatchDetail {
 }
 
 /// A match as a tournament or an SPRT lists it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ContestMatch {
     /// Match id.
     pub id: i64,
@@ -387,7 +389,7 @@ pub struct ContestMatch {
 }
 
 /// A match as an SPRT lists it: with the point share of the SPRT's agent A, once done.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SprtMatch {
     /// The match.
     #[serde(flatten)]
@@ -412,7 +414,7 @@ impl ContestMatch {
 }
 
 /// An agent's id and name.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct NamedAgent {
     /// Id.
     pub id: i64,
@@ -421,7 +423,7 @@ pub struct NamedAgent {
 }
 
 /// A tournament as `GET /tournaments` lists it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct TournamentSummary {
     /// Id.
     pub id: i64,
@@ -440,7 +442,7 @@ pub struct TournamentSummary {
 }
 
 /// `GET /tournaments/{id}`: the summary, its seed, standings, cross-table and matches.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct TournamentView {
     /// What the list shows.
     #[serde(flatten)]
@@ -458,14 +460,14 @@ pub struct TournamentView {
 }
 
 /// `GET /tournaments`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct TournamentList {
     /// Newest first.
     pub tournaments: Vec<TournamentSummary>,
 }
 
 /// An SPRT's log-likelihood-ratio bounds.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Bounds {
     /// Accept H0 at or below.
     pub lower: f64,
@@ -474,7 +476,7 @@ pub struct Bounds {
 }
 
 /// `GET /sprt/{id}`: the row, names, bounds, estimates and matches.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct SprtView {
     /// The row.
     #[serde(flatten)]
@@ -494,7 +496,7 @@ pub struct SprtView {
 }
 
 /// `GET /sprt`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct SprtList {
     /// Newest first.
     pub sprts: Vec<Sprt>,
@@ -502,7 +504,7 @@ pub struct SprtList {
 
 /// A worker as `GET /workers` shows it: its row, its heartbeat's age, whether its lease would still
 /// hold, and the matches it holds now.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct WorkerView {
     /// The row.
     #[serde(flatten)]
@@ -516,7 +518,7 @@ pub struct WorkerView {
 }
 
 /// `GET /workers`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct WorkerList {
     /// The most recent heartbeat first.
     pub workers: Vec<WorkerView>,

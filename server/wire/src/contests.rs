@@ -1,9 +1,10 @@
 //! A tournament in progress as the API shows it: counts by status, standings, cross-table cells.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Whether a tournament still has matches to play.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ProgressState {
     /// Some of its matches are queued or running.
@@ -14,7 +15,7 @@ pub enum ProgressState {
 }
 
 /// How far a tournament has got.
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct Progress {
     /// Matches in it.
     pub total: usize,
@@ -35,7 +36,7 @@ pub struct Progress {
 }
 
 /// One agent's line in the standings.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct Standing {
     /// 1-based place: by points won %, then points won, then id.
     pub place: usize,
@@ -51,7 +52,7 @@ pub struct Standing {
 }
 
 /// One agent's record over finished matches (a tournament's standings, `rally batch`'s summary).
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq, JsonSchema)]
 pub struct Record {
     /// Finished matches.
     pub matches: usize,
@@ -88,7 +89,7 @@ impl Record {
 }
 
 /// A cell of the cross-table: the row agent's record against the column agent.
-#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, JsonSchema)]
 pub struct Cell {
     /// Finished matches between the two.
     pub matches: usize,

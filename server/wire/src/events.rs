@@ -1,12 +1,13 @@
 //! The event stream's messages (`GET /events`, server-sent events).
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::MatchStatus;
 
 /// What changed on the server, as `GET /api/v1/events` streams it (server-sent events): a match
 /// queued, started, finished, failed or cancelled, or an agent registered.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ServerEvent {
     /// What it is about.
     pub kind: EventKind,
@@ -18,7 +19,7 @@ pub struct ServerEvent {
 }
 
 /// What a [`ServerEvent`] is about.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum EventKind {
     /// A match (queued, running, done, failed, cancelled).

@@ -27,3 +27,38 @@ pub use events::*;
 pub use queries::*;
 pub use rows::*;
 pub use words::*;
+
+/// The JSON schemas of the API's answers, as the OpenAPI document's `components.schemas` holds
+/// them (OpenAPI 3.0; what the server writes: a field it leaves out when empty is not required),
+/// by type name. `server/src/openapi.json` is held to them by a test.
+pub fn answer_schemas() -> serde_json::Map<String, serde_json::Value> {
+    use schemars::generate::{Contract, SchemaSettings};
+    let mut g = SchemaSettings::openapi3()
+        .with(|s| s.contract = Contract::Serialize)
+        .into_generator();
+    macro_rules! answers {
+        ($($t:ty),* $(,)?) => { $( g.subschema_for::<$t>(); )* };
+    }
+    answers!(
+        Health,
+        AgentList,
+        Agent,
+        AgentDetail,
+        Submitted,
+        RatingHistory,
+        AgentCrossings,
+        MatchList,
+        Match,
+        MatchDetail,
+        Leaderboard,
+        IssuedToken,
+        TournamentList,
+        TournamentView,
+        SprtList,
+        SprtView,
+        WorkerList,
+        ErrorBody,
+        ServerEvent,
+    );
+    g.take_definitions(true)
+}

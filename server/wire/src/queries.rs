@@ -1,12 +1,13 @@
 //! The query strings the API takes, as types: an unknown parameter, or a value of the wrong kind, is
 //! refused naming it.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::MatchStatus;
 
 /// `GET /agents?all=1`: the retired agents too.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AgentsQuery {
     /// List the retired agents too (`1`/`true`; `0`/`false` or absent: not).
@@ -15,7 +16,7 @@ pub struct AgentsQuery {
 }
 
 /// `?limit=N`: the lists of tournaments, SPRTs and an agent's crossings.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LimitQuery {
     /// Most rows to answer (each list has its default and maximum).
@@ -24,7 +25,7 @@ pub struct LimitQuery {
 }
 
 /// `GET /matches?agent=&status=&limit=&before=`: a page of matches, newest first.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MatchesQuery {
     /// Only the matches of this agent (either side).
@@ -42,7 +43,7 @@ pub struct MatchesQuery {
 }
 
 /// `GET /matches/{id}/replay?rally=K`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ReplayQuery {
     /// The rally, from 0 (default 0).

@@ -2,6 +2,7 @@
 //! agent's drift, crossings and rating history, a worker. The server's store decodes its rows into
 //! these by column name; clients read them from the JSON answers.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::{AgentKind, MatchStatus, SprtStatus, TournamentKind, WorkerStatus};
@@ -21,7 +22,7 @@ fn flag<'de, D: Deserializer<'de>>(d: D) -> Result<bool, D::Error> {
 }
 
 /// An agent row.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Agent {
     /// Id.
     pub id: i64,
@@ -50,7 +51,7 @@ pub struct Agent {
 }
 
 /// A match row.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Match {
     /// Id.
     pub id: i64,
@@ -114,7 +115,7 @@ pub struct Match {
 }
 
 /// A stored rally.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Rally {
     /// Index in the match.
     pub idx: i64,
@@ -131,7 +132,7 @@ pub struct Rally {
 }
 
 /// A tournament row.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Tournament {
     /// Id.
     pub id: i64,
@@ -152,7 +153,7 @@ pub struct Tournament {
 }
 
 /// An SPRT row.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Sprt {
     /// Id.
     pub id: i64,
@@ -189,7 +190,7 @@ pub struct Sprt {
 }
 
 /// An agent's drift over its finished matches (its side's serves and returns, `match_drift`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct AgentDrift {
     /// Matches with drift statistics.
     pub matches: i64,
@@ -204,7 +205,7 @@ pub struct AgentDrift {
 }
 
 /// A crossing of the hitting plane that an agent is answerable for.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct AgentCrossing {
     /// The match.
     pub match_id: i64,
@@ -225,7 +226,7 @@ pub struct AgentCrossing {
 }
 
 /// One point of an agent's rating history.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RatingPoint {
     /// Order in which matches finished (server-wide).
     pub seq: i64,
@@ -242,7 +243,7 @@ pub struct RatingPoint {
 }
 
 /// A worker as `GET /api/v1/workers` shows it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Worker {
     /// Its name (unique; `HOST:PID` unless given).
     pub name: String,
