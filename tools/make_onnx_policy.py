@@ -9,7 +9,9 @@ numpy computes for them (float32, as ONNX runs). Needs `pip install onnx numpy`.
 
 It also writes `policy_variable_width.onnx`, a hostile policy: `act` finite entries for the zero
 observation (so it passes validation), two more for each negative observation entry (the player must
-refuse its action, not index past it).
+refuse its action, not index past it); and `policy_big_constant.onnx`, a few hundred bytes that
+materialise a 10^9-byte constant (ConstantOfShape of 250 000 000 floats, summed into the action), which
+the checkpoint reader must refuse before it allocates.
 """
 import argparse
 import json
@@ -78,12 +80,38 @@ def main():
     hostile.ir_version = 8
     onnx.checker.check_model(hostile)
     onnx.save(hostile, os.path.join(args.out, "policy_variable_width.onnx"))
+    big_constant(args)
     x = rng.standard_normal((5, args.obs)).astype(np.float32)
     y = np.tanh(x @ w1.T + b1) @ w2.T + b2
     with open(os.path.join(args.out, "policy_expected.json"), "w") as f:
         json.dump({"inputs": x.tolist(), "outputs": y.astype(np.float32).tolist()}, f)
     print(f"wrote policy.onnx ({args.obs} -> {args.hidden} -> {args.act}), policy_expected.json and "
           f"policy_variable_width.onnx to {args.out}")
+
+
+def big_constant(args):
+    graph = helper.make_graph(
+        [
+            helper.make_node("Slice", ["obs", "start", "end", "axis"], ["head"]),
+            helper.make_node("ConstantOfShape", ["size"], ["big"],
+                             value=numpy_helper.from_array(np.ones(1, np.float32))),
+            helper.make_node("ReduceSum", ["big"], ["total"], keepdims=1),
+            helper.make_node("Mul", ["total", "zero"], ["nothing"]),
+            helper.make_node("Add", ["head", "nothing"], ["action"]),
+        ],
+        "big_constant",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, args.obs])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, [1, args.act])],
+        [numpy_helper.from_array(np.array([250_000_000], np.int64), "size"),
+         numpy_helper.from_array(np.zeros(1, np.float32), "zero"),
+         numpy_helper.from_array(np.array([0], np.int64), "start"),
+         numpy_helper.from_array(np.array([args.act], np.int64), "end"),
+         numpy_helper.from_array(np.array([1], np.int64), "axis")],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    onnx.checker.check_model(model)
+    onnx.save(model, os.path.join(args.out, "policy_big_constant.onnx"))
 
 
 if __name__ == "__main__":

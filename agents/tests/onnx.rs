@@ -143,6 +143,30 @@ fn an_onnx_graph_whose_output_names_nothing_is_refused_not_a_panic() {
     );
 }
 
+/// The process's peak resident memory, bytes (Linux).
+fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    Some(line.split_whitespace().nth(1)?.parse::<u64>().ok()? * 1024)
+}
+
+#[test]
+fn an_onnx_graph_that_would_allocate_too_much_is_refused_before_it_does() {
+    // `tools/make_onnx_policy.py`: 374 bytes whose ConstantOfShape makes 250 000 000 floats (10^9
+    // bytes) when the graph is optimised or run.
+    let before = peak_rss();
+    let e = refused("policy_big_constant.onnx");
+    assert!(
+        e.message
+            .contains("node 'ConstantOfShape' would make a tensor of 1000000000 bytes"),
+        "{e}"
+    );
+    if let (Some(before), Some(after)) = (before, peak_rss()) {
+        let grew = after.saturating_sub(before);
+        assert!(grew < 256 << 20, "the refusal took {grew} bytes");
+    }
+}
+
 #[test]
 fn an_onnx_model_without_an_input_is_refused_not_a_panic() {
     // Found by the checkpoint_onnx fuzz target once the case above was refused: tract-core 0.23

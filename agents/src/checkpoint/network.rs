@@ -223,6 +223,11 @@ fn build_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError
     let proto = onnx
         .proto_model_for_read(&mut &bytes[..])
         .map_err(|e| refuse(e.to_string()))?;
+    if let Some((node, bytes)) = proto.graph.as_ref().and_then(oversized_generator) {
+        return Err(refuse(format!(
+            "its node '{node}' would make a tensor of {bytes} bytes; at most {MAX_TENSOR_BYTES}"
+        )));
+    }
     if let Some(name) = proto
         .graph
         .as_ref()
@@ -257,6 +262,63 @@ fn build_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError
             )))
         }
     }
+}
+
+/// The most bytes one tensor of an ONNX policy may take (weights or any intermediate value at batch
+/// 1): 64 MiB, sixteen million floats — two orders of magnitude above the trained policies' largest
+/// layer, and far below what a server can afford per match and per replay.
+pub const MAX_TENSOR_BYTES: usize = 64 << 20;
+
+/// A tensor that a node of `g` (or of a subgraph) makes from a constant shape — ConstantOfShape,
+/// Expand, RandomNormal, RandomUniform — bigger than [`MAX_TENSOR_BYTES`]: its node and its bytes.
+/// tract evaluates such nodes while it reads the graph (constants are folded as soon as their
+/// inputs are known), so a few hundred bytes of file could take gigabytes before any check on the
+/// typed graph: the shapes are read from the file first. (A shape computed from constants by other
+/// nodes is not followed; `validation_budget_s` bounds the time such a graph may take.)
+fn oversized_generator(g: &tract_onnx::pb::GraphProto) -> Option<(String, usize)> {
+    let shape_of = |name: &str| -> Option<Vec<i64>> {
+        let t = g.initializer.iter().find(|t| t.name == name)?;
+        if !t.int64_data.is_empty() {
+            return Some(t.int64_data.clone());
+        }
+        Some(
+            t.raw_data
+                .chunks_exact(8)
+                .map(|b| i64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+                .collect(),
+        )
+    };
+    let bytes = |dims: &[i64]| {
+        dims.iter()
+            .try_fold(4usize, |n, &d| {
+                n.checked_mul(usize::try_from(d.max(0)).ok()?)
+            })
+            .unwrap_or(usize::MAX)
+    };
+    let mine = g.node.iter().find_map(|n| {
+        let dims = match n.op_type.as_str() {
+            "ConstantOfShape" => shape_of(n.input.first()?)?,
+            "Expand" => shape_of(n.input.get(1)?)?,
+            "RandomNormal" | "RandomUniform" => {
+                n.attribute.iter().find(|a| a.name == "shape")?.ints.clone()
+            }
+            _ => return None,
+        };
+        let b = bytes(&dims);
+        let label = if n.name.is_empty() {
+            &n.op_type
+        } else {
+            &n.name
+        };
+        (b > MAX_TENSOR_BYTES).then(|| (label.clone(), b))
+    });
+    mine.or_else(|| {
+        g.node
+            .iter()
+            .flat_map(|n| &n.attribute)
+            .flat_map(|a| a.g.iter().chain(&a.graphs))
+            .find_map(oversized_generator)
+    })
 }
 
 /// A graph output (of `g` or of a subgraph in one of its nodes' attributes) that names no input,
