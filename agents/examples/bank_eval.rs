@@ -11,7 +11,7 @@ use std::sync::Arc;
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (path, bank) = (&args[0], &args[1]);
-    let model = Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap());
+    let model = Arc::new(sim::config::default_model());
     let ck =
         Arc::new(Checkpoint::from_json(&std::fs::read_to_string(path).unwrap(), &model).unwrap());
     let balls = BallBank::parse(&std::fs::read_to_string(bank).unwrap()).unwrap();

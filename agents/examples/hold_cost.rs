@@ -9,7 +9,7 @@ use sim::serve::ServeKind;
 use std::sync::Arc;
 
 fn main() {
-    let model = Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap());
+    let model = Arc::new(sim::config::default_model());
     let config = sim::config::ArenaConfig::default();
     let mut env = SingleServe::new(model.clone(), &config, sim::arena::MYOCHALLENGE).unwrap();
     let muscles: Vec<usize> = model.muscles().map(|(i, _)| i).collect();

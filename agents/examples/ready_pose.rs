@@ -3,7 +3,7 @@
 use agents::ik::{BladeTarget, PaddleIk};
 use nalgebra::Vector3;
 fn main() {
-    let model = sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap();
+    let model = sim::config::default_model();
     let grip = model.joint("grip").unwrap();
     let mut ik = PaddleIk::new(
         &model,

@@ -38,7 +38,7 @@ fn main() {
             sim::config::ArenaConfig::myochallenge(),
         ),
         None => (
-            sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap(),
+            sim::config::default_model(),
             sim::config::ArenaConfig::default(),
         ),
     };

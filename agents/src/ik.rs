@@ -320,7 +320,7 @@ mod tests {
 
     #[test]
     fn the_built_in_body_has_a_lumbar_torso_a_wrist_and_one_grip_joint() {
-        let model = sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap();
+        let model = sim::config::default_model();
         let roles = JointRoles::of(&model, model.body("paddle").unwrap());
         let names = |js: &[usize]| -> Vec<String> {
             js.iter().map(|&j| model.joints[j].name.clone()).collect()

@@ -13,7 +13,7 @@ use sim::model::Model;
 use sim::serve::ServeKind;
 
 fn model() -> Arc<Model> {
-    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+    Arc::new(sim::config::default_model())
 }
 
 fn kmac() -> ControllerSpec {

@@ -8,9 +8,7 @@ use agents::checkpoint::Checkpoint;
 
 #[test]
 fn committed_checkpoints_load_validate_and_play() {
-    let m = Arc::new(
-        sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"),
-    );
+    let m = Arc::new(sim::config::default_model());
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/checkpoints");
     let mut seen = 0;
     for entry in std::fs::read_dir(dir).expect("config/checkpoints exists") {
@@ -46,9 +44,7 @@ fn committed_checkpoints_load_validate_and_play() {
 
 #[test]
 fn a_rally_match_between_committed_checkpoints_is_bit_identical_per_seed() {
-    let m = Arc::new(
-        sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"),
-    );
+    let m = Arc::new(sim::config::default_model());
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/checkpoints");
     let load = |name: &str| -> Option<agents::factory::PlayerSpec> {
         let text = std::fs::read_to_string(format!("{dir}/{name}.json")).ok()?;

@@ -9,13 +9,13 @@ use agents::controller::{
 };
 use agents::ik::{BladeTarget, PaddleIk};
 use nalgebra::Vector3;
-use sim::config::{ArenaConfig, DEFAULT_MODEL_XML};
+use sim::config::ArenaConfig;
 use sim::model::Model;
 use sim::rng::Rng;
 use sim::robot::{GripPhase, Robot};
 
 fn model() -> Arc<Model> {
-    Arc::new(sim::mjcf::parse_str(DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+    Arc::new(sim::config::default_model())
 }
 
 fn ready(model: &Model) -> Vec<f64> {

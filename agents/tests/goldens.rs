@@ -111,7 +111,7 @@ fn the_golden_rule_refuses_a_changed_output_under_the_same_version() {
 }
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"))
+    Arc::new(sim::config::default_model())
 }
 
 fn v3(v: &nalgebra::Vector3<f64>) -> Value {

@@ -11,9 +11,7 @@ use sim::robot::Robot;
 
 fn spec(rallies: u32, seed: u64, replay: bool) -> MatchSpec {
     MatchSpec {
-        model: Arc::new(
-            sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap(),
-        ),
+        model: Arc::new(sim::config::default_model()),
         config: sim::config::ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,
         rallies,

@@ -124,7 +124,7 @@ fn every_method_trains_on_it_and_its_run_resumes_only_on_it() {
                 .load_on(m.clone(), arena.clone(), "myochallenge")
                 .unwrap();
             assert_eq!(again.progress.iteration, t.progress.iteration);
-            let other = sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").unwrap();
+            let other = sim::config::default_model();
             let refused = run.load(Arc::new(other)).err().expect("refused");
             assert!(refused.contains("myochallenge"), "{refused}");
             let _ = std::fs::remove_dir_all(&dir);

@@ -9,7 +9,7 @@ use agents::controller::{ControllerSpec, PdGains};
 use agents::observation::ObsBlock;
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+    Arc::new(sim::config::default_model())
 }
 
 fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint {

@@ -9,7 +9,7 @@ use agents::factory::{players_built, PlayerSpec};
 use sim::serve::ServeKind;
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"))
+    Arc::new(sim::config::default_model())
 }
 
 #[test]

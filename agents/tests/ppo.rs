@@ -10,7 +10,7 @@ use agents::ppo::trainer::Trainer;
 use agents::ppo::{Method, TrainConfig};
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"))
+    Arc::new(sim::config::default_model())
 }
 
 /// A small configuration that still runs the whole algorithm.

@@ -9,7 +9,7 @@ use agents::ppo::trainer::Trainer;
 use agents::ppo::{Method, TrainConfig, TrainEnv};
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").expect("model"))
+    Arc::new(sim::config::default_model())
 }
 
 fn rally_config(envs: usize, steps: usize, every: usize) -> TrainConfig {

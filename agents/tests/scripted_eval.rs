@@ -9,9 +9,7 @@ use sim::serve::ServeKind;
 
 fn evaluation(seed: u64, episodes: usize) -> Evaluation {
     Evaluation {
-        model: Arc::new(
-            sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap(),
-        ),
+        model: Arc::new(sim::config::default_model()),
         config: sim::config::ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,
         kind: ServeKind::P2,

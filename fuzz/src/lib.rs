@@ -6,6 +6,6 @@ use std::sync::{Arc, OnceLock};
 pub fn model() -> &'static Arc<sim::model::Model> {
     static MODEL: OnceLock<Arc<sim::model::Model>> = OnceLock::new();
     MODEL.get_or_init(|| {
-        Arc::new(sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+        Arc::new(sim::config::default_model())
     })
 }

@@ -113,7 +113,7 @@ mod tests {
     use super::*;
 
     fn model() -> sim::model::Model {
-        sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "upper_body.xml").unwrap()
+        sim::config::default_model()
     }
 
     fn template(name: &str) -> String {

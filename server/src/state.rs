@@ -106,10 +106,7 @@ pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
             "re-queued running matches whose worker's lease ran out"
         );
     }
-    let model = Arc::new(sim::mjcf::parse_str(
-        sim::config::DEFAULT_MODEL_XML,
-        "config/models/upper_body.xml",
-    )?);
+    let model = Arc::new(sim::config::default_model());
     let workers = settings.workers.max(1);
     let worker = Arc::new(settings.worker());
     let players = Arc::new(crate::players::PlayerCache::new(settings.player_cache));

@@ -11,6 +11,13 @@ pub const MYOCHALLENGE_ARENA_TOML: &str = include_str!("../../config/myochalleng
 /// The shipped robot, `config/models/upper_body.xml`.
 pub const DEFAULT_MODEL_XML: &str = include_str!("../../config/models/upper_body.xml");
 
+/// The shipped robot, parsed: the one place [`DEFAULT_MODEL_XML`] is read (it is compiled in and
+/// the tests load it, so it always parses).
+pub fn default_model() -> crate::model::Model {
+    crate::mjcf::parse_str(DEFAULT_MODEL_XML, "config/models/upper_body.xml")
+        .expect("the shipped config/models/upper_body.xml is valid")
+}
+
 /// Grip constants (docs/design.md §5), as `[grip]` in `config/arena.toml` documents them.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]

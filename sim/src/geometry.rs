@@ -264,8 +264,7 @@ impl PaddleShape {
     pub fn standard() -> PaddleShape {
         static SHAPE: std::sync::OnceLock<PaddleShape> = std::sync::OnceLock::new();
         *SHAPE.get_or_init(|| {
-            let model = crate::mjcf::parse_str(crate::config::DEFAULT_MODEL_XML, "upper_body.xml")
-                .expect("the compiled-in default model loads (tested)");
+            let model = crate::config::default_model();
             let paddle = model
                 .body("paddle")
                 .expect("the default model has a paddle");

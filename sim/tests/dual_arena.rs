@@ -13,7 +13,7 @@ use sim::{BallState, ContactKind};
 type V3 = Vector3<f64>;
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(sim::mjcf::parse_str(DEFAULT_MODEL_XML, "upper_body.xml").expect("default model"))
+    Arc::new(sim::config::default_model())
 }
 
 fn ready(model: &sim::model::Model) -> Vec<f64> {

@@ -5,14 +5,14 @@
 use std::sync::Arc;
 
 use sim::arena::{Side, MYOCHALLENGE};
-use sim::config::{ArenaConfig, DEFAULT_MODEL_XML};
+use sim::config::ArenaConfig;
 use sim::episode::{Rally, SingleServe};
 use sim::rng::Rng;
 use sim::rules::{EndReason, Failure};
 use sim::serve::ServeKind;
 
 fn model() -> Arc<sim::model::Model> {
-    Arc::new(sim::mjcf::parse_str(DEFAULT_MODEL_XML, "upper_body.xml").unwrap())
+    Arc::new(sim::config::default_model())
 }
 
 #[test]

@@ -85,12 +85,7 @@ pub fn parse_preset(s: &str) -> Result<sim::Preset, String> {
 
 /// The default robot model compiled into the simulator.
 pub fn default_model() -> Result<std::sync::Arc<sim::model::Model>, CliError> {
-    let m = sim::mjcf::parse_str(
-        sim::config::DEFAULT_MODEL_XML,
-        "config/models/upper_body.xml",
-    )
-    .map_err(anyhow::Error::from)?;
-    Ok(std::sync::Arc::new(m))
+    Ok(std::sync::Arc::new(sim::config::default_model()))
 }
 
 /// `--model`: the robot that plays, for the commands that run one.

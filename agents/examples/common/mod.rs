@@ -23,9 +23,7 @@ pub struct Bench {
 impl Bench {
     /// Reads the checkpoint at `path`; panics with the reason if it does not load.
     pub fn load(path: &str) -> Bench {
-        let model = Arc::new(
-            sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "u.xml").expect("default model"),
-        );
+        let model = Arc::new(sim::config::default_model());
         let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
         let checkpoint = Arc::new(
             Checkpoint::from_json(&text, &model).unwrap_or_else(|e| panic!("{path}: {e}")),

@@ -271,9 +271,7 @@ mod tests {
         assert_eq!(current.attempt, 2);
 
         let spec = agents::matchrun::MatchSpec {
-            model: std::sync::Arc::new(
-                sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "m.xml").unwrap(),
-            ),
+            model: std::sync::Arc::new(sim::config::default_model()),
             config: sim::config::ArenaConfig::default(),
             preset: sim::arena::MYOCHALLENGE,
             rallies: 1,
@@ -335,9 +333,7 @@ mod tests {
         register(&pool, "w", "h", 1, 1, 60_000).await.unwrap();
         let (_, lease) = claim(&pool, "w", 60_000).await.unwrap().unwrap();
         let spec = agents::matchrun::MatchSpec {
-            model: std::sync::Arc::new(
-                sim::mjcf::parse_str(sim::config::DEFAULT_MODEL_XML, "m.xml").unwrap(),
-            ),
+            model: std::sync::Arc::new(sim::config::default_model()),
             config: sim::config::ArenaConfig::default(),
             preset: sim::arena::MYOCHALLENGE,
             rallies: 1,

@@ -68,10 +68,7 @@ fn overhead(stores: &Stores) -> anyhow::Result<Value> {
         let all = server::db::agents(&pool).await?;
         anyhow::ensure!(all.len() >= 2, "fewer than two built-in agents");
         let spec = agents::matchrun::MatchSpec {
-            model: std::sync::Arc::new(sim::mjcf::parse_str(
-                sim::config::DEFAULT_MODEL_XML,
-                "config/models/upper_body.xml",
-            )?),
+            model: std::sync::Arc::new(sim::config::default_model()),
             config: sim::config::ArenaConfig::default(),
             preset: sim::arena::MYOCHALLENGE,
             rallies: 1,
