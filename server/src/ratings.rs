@@ -138,6 +138,57 @@ fn established(
     }
 }
 
+/// Bradley–Terry ratings of `n` agents from (A, B, points A, points B) matches, started from `start`.
+fn fit(
+    n: usize,
+    sample: &mut dyn Iterator<Item = &(usize, usize, f64, f64)>,
+    start: Option<&[f64]>,
+) -> Vec<f64> {
+    let mut wins = vec![vec![0.0; n]; n];
+    for &(a, b, pa, pb) in sample {
+        if a != b {
+            wins[a][b] += pa;
+            wins[b][a] += pb;
+        }
+    }
+    bradley_terry_from(&wins, start)
+}
+
+/// Each agent's 95% interval: percentiles of [`BOOTSTRAP`] seeded resamples of the matches, each
+/// fitted from `rating` and put on the scale by `anchored`. Matches against itself rate nothing:
+/// without another opponent an agent has none.
+fn intervals(
+    n: usize,
+    pairs: &[(usize, usize, f64, f64)],
+    rating: &[f64],
+    anchored: &dyn Fn(Vec<f64>) -> Vec<f64>,
+) -> Vec<(Option<f64>, Option<f64>)> {
+    let mut boot = vec![Vec::with_capacity(BOOTSTRAP); n];
+    if !pairs.is_empty() {
+        let mut state = 0x5eed_u64;
+        for _ in 0..BOOTSTRAP {
+            let picks: Vec<usize> = (0..pairs.len())
+                .map(|_| (agents::seeds::splitmix64(&mut state) % pairs.len() as u64) as usize)
+                .collect();
+            let r = anchored(fit(n, &mut picks.iter().map(|&k| &pairs[k]), Some(rating)));
+            for (i, x) in r.into_iter().enumerate() {
+                boot[i].push(x);
+            }
+        }
+    }
+    (0..n)
+        .map(|i| {
+            let rated = pairs.iter().any(|p| p.0 != p.1 && (p.0 == i || p.1 == i));
+            if !rated || boot[i].is_empty() {
+                return (None, None);
+            }
+            let mut s = boot[i].clone();
+            s.sort_by(f64::total_cmp);
+            (Some(percentile(&s, 0.025)), Some(percentile(&s, 0.975)))
+        })
+        .collect()
+}
+
 /// Computes the leaderboard of `agents` from the finished matches.
 pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) -> Leaderboard {
     let n = agents.len();
@@ -146,17 +197,6 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
         .iter()
         .filter_map(|o| Some((index(o.0)?, index(o.1)?, o.2 as f64, o.3 as f64)))
         .collect();
-    let fit = |sample: &mut dyn Iterator<Item = &(usize, usize, f64, f64)>,
-               start: Option<&[f64]>| {
-        let mut wins = vec![vec![0.0; n]; n];
-        for &(a, b, pa, pb) in sample {
-            if a != b {
-                wins[a][b] += pa;
-                wins[b][a] += pb;
-            }
-        }
-        bradley_terry_from(&wins, start)
-    };
     // The anchor, if it has played another agent: the scale is shifted to hold it at its value.
     let anchor = extras.anchor.and_then(|(id, value)| {
         let i = index(id)?;
@@ -172,33 +212,9 @@ pub fn leaderboard(agents: &[Entrant], outcomes: &[Outcome], extras: &Extras) ->
         }
         r
     };
-    let rating = fit(&mut pairs.iter(), None);
-    let mut boot = vec![Vec::with_capacity(BOOTSTRAP); n];
-    if !pairs.is_empty() {
-        let mut state = 0x5eed_u64;
-        for _ in 0..BOOTSTRAP {
-            let picks: Vec<usize> = (0..pairs.len())
-                .map(|_| (agents::seeds::splitmix64(&mut state) % pairs.len() as u64) as usize)
-                .collect();
-            let r = anchored(fit(&mut picks.iter().map(|&k| &pairs[k]), Some(&rating)));
-            for (i, x) in r.into_iter().enumerate() {
-                boot[i].push(x);
-            }
-        }
-    }
+    let rating = fit(n, &mut pairs.iter(), None);
+    let intervals = intervals(n, &pairs, &rating, &anchored);
     let rating = anchored(rating);
-    // Matches against itself rate nothing: without another opponent there is no interval.
-    let intervals: Vec<(Option<f64>, Option<f64>)> = (0..n)
-        .map(|i| {
-            let rated = pairs.iter().any(|p| p.0 != p.1 && (p.0 == i || p.1 == i));
-            if !rated || boot[i].is_empty() {
-                return (None, None);
-            }
-            let mut s = boot[i].clone();
-            s.sort_by(f64::total_cmp);
-            (Some(percentile(&s, 0.025)), Some(percentile(&s, 0.975)))
-        })
-        .collect();
     let established = established(
         &pairs,
         &intervals,

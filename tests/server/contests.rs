@@ -24,7 +24,7 @@ fn multipart(boundary: &str, fields: &[(&str, &str)], file: (&str, &str, &[u8]))
 }
 
 #[test]
-fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
+fn tournaments_rate_limits_multipart_and_rating_history() {
     let dir = tempdir("contests");
     // The three scripted built-ins only: the counts below are theirs.
     let srv = start_with(
@@ -233,6 +233,26 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
         "{row:?}"
     );
 
+    // A submitter cannot cancel what it did not queue; a finished tournament cannot be cancelled.
+    let (code, e) = delete(a, &format!("/api/v1/tournaments/{tid}"), Some(&other));
+    assert_eq!(code, 403, "{e}");
+    let (code, e) = delete(a, &format!("/api/v1/tournaments/{tid}"), Some(&token));
+    assert_eq!(
+        (code, e["error"]["code"].as_str()),
+        (409, Some("not_cancellable")),
+        "{e}"
+    );
+}
+
+#[test]
+fn an_sprt_plays_one_match_at_a_time_until_it_decides_and_only_its_owner_cancels_it() {
+    let dir = tempdir("sprt");
+    let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    let lab = NewToken { name: "lab".into() };
+    let t: IssuedToken = post_as(a, "/api/v1/tokens", &lab, Some(TOKEN), 201);
+    let token = t.token;
+
     // An SPRT plays one match at a time, sides swapped and seed + k, until the test decides.
     let test = NewSprt {
         elo1: 100.0,
@@ -299,14 +319,6 @@ fn tournaments_sprt_rate_limits_multipart_and_rating_history() {
     assert_eq!(
         (code, e["error"]["code"].as_str()),
         (403, Some("not_owner")),
-        "{e}"
-    );
-    let (code, e) = delete(a, &format!("/api/v1/tournaments/{tid}"), Some(&other));
-    assert_eq!(code, 403, "{e}");
-    let (code, e) = delete(a, &format!("/api/v1/tournaments/{tid}"), Some(&token));
-    assert_eq!(
-        (code, e["error"]["code"].as_str()),
-        (409, Some("not_cancellable")),
         "{e}"
     );
     let (code, c) = delete(a, &format!("/api/v1/sprt/{pid2}"), Some(TOKEN));

@@ -188,6 +188,56 @@ fn specs_unchanged(m: &db::Match, spec_a: &str, spec_b: &str) -> bool {
     db::spec_hash(spec_a) == m.spec_hash_a && db::spec_hash(spec_b) == m.spec_hash_b
 }
 
+/// Both sides of match `m`: each agent's stored hash must still be the match's (none if one is not),
+/// and its player comes from the cache by that hash; only a miss reads the spec (a checkpoint's
+/// JSON, ~1 MB) for the blocking thread to build.
+async fn sides(state: &AppState, m: &db::Match) -> anyhow::Result<Option<Vec<Side>>> {
+    let mut sides = Vec::with_capacity(2);
+    for (agent, queued_with) in [(m.agent_a, &m.spec_hash_a), (m.agent_b, &m.spec_hash_b)] {
+        let (kind, hash) = db::agent_kind_and_hash(&state.pool, agent)
+            .await?
+            .ok_or_else(|| anyhow::anyhow!("agent {agent} no longer exists"))?;
+        if &hash != queued_with {
+            return Ok(None);
+        }
+        let side = match state.players.lookup(kind, &hash) {
+            Some(player) => Side::Built(player),
+            None => {
+                let (kind, spec) = db::agent_spec(&state.pool, agent)
+                    .await?
+                    .ok_or_else(|| anyhow::anyhow!("agent {agent} no longer exists"))?;
+                Side::Spec(kind, spec)
+            }
+        };
+        sides.push(side);
+    }
+    Ok(Some(sides))
+}
+
+/// Stores a played match under its lease. A busy database is retried; a match that still cannot be
+/// stored keeps its lease until the heartbeat stops (this process exits), then is queued again
+/// (nothing half-written: it is one transaction).
+async fn store_retrying(
+    state: &AppState,
+    lease: &db::Lease,
+    record: &agents::matchrun::MatchRecord,
+    replay: &agents::matchrun::Replay,
+) -> anyhow::Result<db::Stored> {
+    let mut attempt = 0;
+    loop {
+        match db::store_result(&state.pool, lease, record, replay).await {
+            Ok(stored) => return Ok(stored),
+            Err(e) if attempt < 5 => {
+                attempt += 1;
+                let id = lease.match_id;
+                tracing::warn!(id, attempt, error = %e, "storing a match failed; retrying");
+                tokio::time::sleep(Duration::from_millis(200 * attempt)).await;
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
 pub(super) async fn run_one(
     state: &AppState,
     m: db::Match,
@@ -219,31 +269,13 @@ pub(super) async fn run_one(
         }
     }
     let _unregister = Unregister(state.clone(), id);
-    // Each side: its agent's stored hash must still be the match's, and its player comes from the
-    // cache by that hash; only a miss reads the spec (a checkpoint's JSON, ~1 MB) and builds it.
-    let mut sides = Vec::with_capacity(2);
-    for (agent, queued_with) in [(m.agent_a, &m.spec_hash_a), (m.agent_b, &m.spec_hash_b)] {
-        let (kind, hash) = db::agent_kind_and_hash(&state.pool, agent)
-            .await?
-            .ok_or_else(|| anyhow::anyhow!("agent {agent} no longer exists"))?;
-        if &hash != queued_with {
-            let error = "an agent's spec changed since the match was queued";
-            if db::fail(&state.pool, &lease, error).await? == db::Stored::Done {
-                state.publish_match(id, db::MatchStatus::Failed);
-            }
-            return Ok(());
+    let Some(sides) = sides(state, &m).await? else {
+        let error = "an agent's spec changed since the match was queued";
+        if db::fail(&state.pool, &lease, error).await? == db::Stored::Done {
+            state.publish_match(id, db::MatchStatus::Failed);
         }
-        let side = match state.players.lookup(kind, &hash) {
-            Some(player) => Side::Built(player),
-            None => {
-                let (kind, spec) = db::agent_spec(&state.pool, agent)
-                    .await?
-                    .ok_or_else(|| anyhow::anyhow!("agent {agent} no longer exists"))?;
-                Side::Spec(kind, spec)
-            }
-        };
-        sides.push(side);
-    }
+        return Ok(());
+    };
     let st = state.clone();
     let started = std::time::Instant::now();
     let result = tokio::task::spawn_blocking(move || {
@@ -258,21 +290,7 @@ pub(super) async fn run_one(
     .await;
     let (stored, status) = match result {
         Ok(Ok((record, replay))) => {
-            // A busy database is retried; a match that still cannot be stored keeps its lease
-            // until the heartbeat stops (this process exits), then is queued again (nothing
-            // half-written: it is one transaction).
-            let mut attempt = 0;
-            let stored = loop {
-                match db::store_result(&state.pool, &lease, &record, &replay).await {
-                    Ok(stored) => break stored,
-                    Err(e) if attempt < 5 => {
-                        attempt += 1;
-                        tracing::warn!(id, attempt, error = %e, "storing a match failed; retrying");
-                        tokio::time::sleep(Duration::from_millis(200 * attempt)).await;
-                    }
-                    Err(e) => return Err(e.into()),
-                }
-            };
+            let stored = store_retrying(state, &lease, &record, &replay).await?;
             tracing::info!(
                 id,
                 points_a = record.points[0],

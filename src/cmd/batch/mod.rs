@@ -277,8 +277,11 @@ fn submit_one(
             seed,
             label,
         } => {
+            let kind = kind
+                .parse::<wire::TournamentKind>()
+                .map_err(|e| anyhow::anyhow!("{label}: {e}"))?;
             let q = wire::NewTournament {
-                kind: *kind,
+                kind,
                 agents: agents.iter().map(|&id| id.into()).collect(),
                 rallies_per_match: *rallies_per_match,
                 rounds: *rounds,
