@@ -21,29 +21,6 @@ pub fn rating_update(
     vec![(agents[0], a), (agents[1], b)]
 }
 
-/// What an SPRT was asked to decide (its row's settings).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SprtSpec {
-    /// The agent whose advantage is tested.
-    pub agent_a: i64,
-    /// Its opponent.
-    pub agent_b: i64,
-    /// H0's Elo advantage.
-    pub elo0: f64,
-    /// H1's Elo advantage.
-    pub elo1: f64,
-    /// False-positive rate.
-    pub alpha: f64,
-    /// False-negative rate.
-    pub beta: f64,
-    /// Rallies per match.
-    pub rallies_per_match: u32,
-    /// Matches after which it stops undecided.
-    pub max_matches: u64,
-    /// Seed of its first match.
-    pub seed: u64,
-}
-
 /// A match to queue: sides, rallies, seed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NextMatch {
@@ -73,8 +50,8 @@ pub struct SprtStep {
 /// The SPRT's step (fishtest's GSPRT on per-match point shares, `ratings::sprt_llr`) from its
 /// finished matches, as (side A's agent, points of A, points of B) in the order they were played:
 /// accept H1 at or above the upper bound, H0 at or below the lower, stop undecided after
-/// `max_matches`, else queue the next match.
-pub fn sprt_step(s: &SprtSpec, done: &[(i64, i64, i64)]) -> SprtStep {
+/// `max_matches`, else queue the next match. `s` is the SPRT's stored row: its settings.
+pub fn sprt_step(s: &wire::Sprt, done: &[(i64, i64, i64)]) -> SprtStep {
     let scores: Vec<f64> = done
         .iter()
         .filter_map(|&(a, pa, pb)| crate::ratings::share_of(s.agent_a, a, pa, pb))
@@ -86,7 +63,7 @@ pub fn sprt_step(s: &SprtSpec, done: &[(i64, i64, i64)]) -> SprtStep {
         SprtStatus::AcceptedH1
     } else if llr <= lower {
         SprtStatus::AcceptedH0
-    } else if n >= s.max_matches {
+    } else if n >= s.max_matches.max(0) as u64 {
         SprtStatus::Inconclusive
     } else {
         SprtStatus::Running
@@ -100,9 +77,9 @@ pub fn sprt_step(s: &SprtSpec, done: &[(i64, i64, i64)]) -> SprtStep {
         NextMatch {
             a,
             b,
-            rallies: s.rallies_per_match,
+            rallies: s.rallies_per_match as u32,
             // Seeds are stored as SQL integers: keep them non-negative.
-            seed: s.seed.wrapping_add(n) & (i64::MAX as u64),
+            seed: (s.seed as u64).wrapping_add(n) & (i64::MAX as u64),
         }
     });
     SprtStep {
@@ -131,8 +108,9 @@ mod tests {
         assert_eq!(e, "must be one of queued, running, done, failed, cancelled");
     }
 
-    fn spec() -> SprtSpec {
-        SprtSpec {
+    fn spec() -> wire::Sprt {
+        wire::Sprt {
+            id: 1,
             agent_a: 1,
             agent_b: 2,
             elo0: 0.0,
@@ -142,6 +120,12 @@ mod tests {
             rallies_per_match: 10,
             max_matches: 6,
             seed: 40,
+            status: SprtStatus::Running,
+            llr: 0.0,
+            matches_done: 0,
+            created_by: None,
+            created_at: String::new(),
+            finished_at: None,
         }
     }
 

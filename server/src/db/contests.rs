@@ -233,18 +233,7 @@ pub(super) async fn sprt_step(conn: &mut sqlx::AnyConnection, id: i64) -> sqlx::
         .bind(id)
         .fetch_all(&mut *conn)
         .await?;
-    let spec = crate::domain::SprtSpec {
-        agent_a: s.agent_a,
-        agent_b: s.agent_b,
-        elo0: s.elo0,
-        elo1: s.elo1,
-        alpha: s.alpha,
-        beta: s.beta,
-        rallies_per_match: s.rallies_per_match as u32,
-        max_matches: s.max_matches.max(0) as u64,
-        seed: s.seed as u64,
-    };
-    let step = crate::domain::sprt_step(&spec, &done);
+    let step = crate::domain::sprt_step(&s, &done);
     sqlx::query("UPDATE sprts SET llr = $1, matches_done = $2, status = $3, finished_at = CASE WHEN $4 = 'running' THEN NULL ELSE $6 END WHERE id = $5")
         .bind(step.llr)
         .bind(step.matches_done as i64)
