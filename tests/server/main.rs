@@ -25,6 +25,7 @@ use common::*;
 
 mod admission;
 mod bad_input;
+mod cancel;
 mod contests;
 mod edge;
 mod lifecycle;
