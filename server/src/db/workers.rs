@@ -240,14 +240,42 @@ mod tests {
     use super::*;
     use crate::db::{self, Stored};
 
-    #[tokio::test]
-    async fn a_result_reported_after_the_lease_ran_out_is_refused_and_the_new_holder_stores_once() {
-        let pool = db::test_store("lease").await;
+    /// A fresh store with the built-ins and one queued 1-rally match of the first two, seed `seed`.
+    async fn queued_match(tag: &str, seed: u64) -> (Pool, Vec<db::Agent>, i64) {
+        let pool = db::test_store(tag).await;
         db::register_builtins(&pool).await.unwrap();
         let all = db::agents(&pool).await.unwrap();
-        let id = db::queue_match(&pool, &all[0], &all[1], 1, 1, false, db::Origin::default())
-            .await
-            .unwrap();
+        let id = db::queue_match(
+            &pool,
+            &all[0],
+            &all[1],
+            1,
+            seed,
+            false,
+            db::Origin::default(),
+        )
+        .await
+        .unwrap();
+        (pool, all, id)
+    }
+
+    /// That match played: one rally of the scripted agent against itself.
+    fn one_rally(seed: u64) -> (agents::matchrun::MatchRecord, agents::matchrun::Replay) {
+        let spec = agents::matchrun::MatchSpec {
+            model: std::sync::Arc::new(sim::config::default_model()),
+            config: sim::config::ArenaConfig::default(),
+            preset: sim::arena::MYOCHALLENGE,
+            rallies: 1,
+            seed,
+            replay: false,
+        };
+        let scripted = agents::factory::PlayerSpec::scripted("scripted").unwrap();
+        agents::matchrun::play_match(&spec, &scripted, &scripted, &mut |_| {}).unwrap()
+    }
+
+    #[tokio::test]
+    async fn a_result_reported_after_the_lease_ran_out_is_refused_and_the_new_holder_stores_once() {
+        let (pool, _, id) = queued_match("lease", 1).await;
         register(&pool, "old", "h", 1, 1, 60_000).await.unwrap();
         register(&pool, "new", "h", 2, 1, 60_000).await.unwrap();
         // A live name is not taken twice.
@@ -270,17 +298,7 @@ mod tests {
         let (_, current) = claim(&pool, "new", 60_000).await.unwrap().unwrap();
         assert_eq!(current.attempt, 2);
 
-        let spec = agents::matchrun::MatchSpec {
-            model: std::sync::Arc::new(sim::config::default_model()),
-            config: sim::config::ArenaConfig::default(),
-            preset: sim::arena::MYOCHALLENGE,
-            rallies: 1,
-            seed: 1,
-            replay: false,
-        };
-        let scripted = agents::factory::PlayerSpec::scripted("scripted").unwrap();
-        let (record, replay) =
-            agents::matchrun::play_match(&spec, &scripted, &scripted, &mut |_| {}).unwrap();
+        let (record, replay) = one_rally(1);
         // The old holder's result is refused, its failure too; the current holder's is stored once.
         assert_eq!(
             db::store_result(&pool, &stale, &record, &replay)
@@ -324,25 +342,10 @@ mod tests {
 
     #[tokio::test]
     async fn a_match_without_crossings_stores_no_in_box_share() {
-        let pool = db::test_store("no_crossings").await;
-        db::register_builtins(&pool).await.unwrap();
-        let all = db::agents(&pool).await.unwrap();
-        let id = db::queue_match(&pool, &all[0], &all[1], 1, 3, false, db::Origin::default())
-            .await
-            .unwrap();
+        let (pool, all, id) = queued_match("no_crossings", 3).await;
         register(&pool, "w", "h", 1, 1, 60_000).await.unwrap();
         let (_, lease) = claim(&pool, "w", 60_000).await.unwrap().unwrap();
-        let spec = agents::matchrun::MatchSpec {
-            model: std::sync::Arc::new(sim::config::default_model()),
-            config: sim::config::ArenaConfig::default(),
-            preset: sim::arena::MYOCHALLENGE,
-            rallies: 1,
-            seed: 3,
-            replay: false,
-        };
-        let scripted = agents::factory::PlayerSpec::scripted("scripted").unwrap();
-        let (mut record, replay) =
-            agents::matchrun::play_match(&spec, &scripted, &scripted, &mut |_| {}).unwrap();
+        let (mut record, replay) = one_rally(3);
         // As a match whose balls never crossed a hitting plane has it.
         record.drift.crossings = 0;
         record.drift.in_box_fraction = 0.0;
