@@ -97,32 +97,17 @@ pub(crate) fn call_json(
     path: &str,
     body: &str,
 ) -> anyhow::Result<serde_json::Value> {
+    Ok(serde_json::from_str(&call(addr, method, path, body)?)?)
+}
+
+/// One request with the admin token on a fresh connection (closed after it); the answer's body.
+fn call(addr: &str, method: &str, path: &str, body: &str) -> anyhow::Result<String> {
     use std::io::{Read, Write};
     let mut s = std::net::TcpStream::connect(addr)?;
     write!(
         s,
         "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nAuthorization: Bearer {BENCH_TOKEN}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
         body.len()
-    )?;
-    let mut resp = String::new();
-    s.read_to_string(&mut resp)?;
-    let body = resp.split_once("\r\n\r\n").map(|x| x.1).unwrap_or("");
-    Ok(serde_json::from_str(body)?)
-}
-
-pub(super) fn proc_status_kib(pid: u32, key: &str) -> Option<f64> {
-    let text = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let line = text.lines().find(|l| l.starts_with(key))?;
-    line.split_whitespace().nth(1)?.parse().ok()
-}
-
-/// GETs `path` (as plain text: the metrics) with a fresh connection.
-fn get_text(addr: &str, path: &str) -> anyhow::Result<String> {
-    use std::io::{Read, Write};
-    let mut s = std::net::TcpStream::connect(addr)?;
-    write!(
-        s,
-        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
     )?;
     let mut resp = String::new();
     s.read_to_string(&mut resp)?;
@@ -133,9 +118,15 @@ fn get_text(addr: &str, path: &str) -> anyhow::Result<String> {
         .to_string())
 }
 
+pub(super) fn proc_status_kib(pid: u32, key: &str) -> Option<f64> {
+    let text = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = text.lines().find(|l| l.starts_with(key))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
 /// A sample's value in the server's metrics.
 fn metric(addr: &str, name: &str) -> anyhow::Result<f64> {
-    let text = get_text(addr, "/api/v1/metrics")?;
+    let text = call(addr, "GET", "/api/v1/metrics", "")?;
     text.lines()
         .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.trim().parse().ok())
         .ok_or_else(|| anyhow!("no metric {name} in the server's answer"))
