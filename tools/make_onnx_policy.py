@@ -81,6 +81,8 @@ def main():
     onnx.checker.check_model(hostile)
     onnx.save(hostile, os.path.join(args.out, "policy_variable_width.onnx"))
     big_constant(args)
+    computed_big(args)
+    slow(args)
     x = rng.standard_normal((5, args.obs)).astype(np.float32)
     y = np.tanh(x @ w1.T + b1) @ w2.T + b2
     with open(os.path.join(args.out, "policy_expected.json"), "w") as f:
@@ -112,6 +114,65 @@ def big_constant(args):
     model.ir_version = 8
     onnx.checker.check_model(model)
     onnx.save(model, os.path.join(args.out, "policy_big_constant.onnx"))
+
+
+def save(graph, args, name):
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    onnx.checker.check_model(model)
+    onnx.save(model, os.path.join(args.out, name))
+
+
+def computed_big(args):
+    # Shape(obs) = [1, obs], times [1, 1e9 / obs]: [1, ~1e9] floats, ~4 GB, known only once the
+    # shape is computed.
+    per = 1_000_000_000 // args.obs
+    graph = helper.make_graph(
+        [
+            helper.make_node("Slice", ["obs", "start", "end", "axis"], ["head"]),
+            helper.make_node("Shape", ["obs"], ["shape"]),
+            helper.make_node("Mul", ["shape", "factor"], ["size"]),
+            helper.make_node("ConstantOfShape", ["size"], ["big"],
+                             value=numpy_helper.from_array(np.ones(1, np.float32))),
+            helper.make_node("ReduceSum", ["big"], ["total"], keepdims=1),
+            helper.make_node("Mul", ["total", "zero"], ["nothing"]),
+            helper.make_node("Add", ["head", "nothing"], ["action"]),
+        ],
+        "computed_big",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, args.obs])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, [1, args.act])],
+        [numpy_helper.from_array(np.array([1, per], np.int64), "factor"),
+         numpy_helper.from_array(np.zeros(1, np.float32), "zero"),
+         numpy_helper.from_array(np.array([0], np.int64), "start"),
+         numpy_helper.from_array(np.array([args.act], np.int64), "end"),
+         numpy_helper.from_array(np.array([1], np.int64), "axis")],
+    )
+    save(graph, args, "policy_computed_big.onnx")
+
+
+def slow(args):
+    # x (the first 64 observation entries) times a constant 64 x 64 matrix of 1/64, 2 000 times.
+    depth = 2000
+    nodes = [
+        helper.make_node("Slice", ["obs", "start", "width", "axis"], ["x0"]),
+        helper.make_node("ConstantOfShape", ["square"], ["w"],
+                         value=numpy_helper.from_array(np.full(1, 1 / 64, np.float32))),
+    ]
+    for i in range(depth):
+        nodes.append(helper.make_node("MatMul", [f"x{i}", "w"], [f"x{i + 1}"]))
+    nodes.append(helper.make_node("Slice", [f"x{depth}", "start", "end", "axis"], ["action"]))
+    graph = helper.make_graph(
+        nodes,
+        "slow",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, args.obs])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, [1, args.act])],
+        [numpy_helper.from_array(np.array([64, 64], np.int64), "square"),
+         numpy_helper.from_array(np.array([0], np.int64), "start"),
+         numpy_helper.from_array(np.array([64], np.int64), "width"),
+         numpy_helper.from_array(np.array([args.act], np.int64), "end"),
+         numpy_helper.from_array(np.array([1], np.int64), "axis")],
+    )
+    save(graph, args, "policy_slow.onnx")
 
 
 if __name__ == "__main__":

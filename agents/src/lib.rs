@@ -5,16 +5,18 @@
 //! kinematics for the paddle ([`ik`]), the scripted house agent ([`scripted`]), what a policy sees
 //! ([`observation`]), the RL environments ([`env`]), checkpoints ([`checkpoint`]), who plays
 //! ([`player`]: the trait; [`factory`]: building one from a name or a checkpoint), PPO ([`ppo`]),
-//! evaluation ([`eval`]), the match runner ([`matchrun`]) and the seeds they share ([`seeds`]).
+//! evaluation ([`eval`]), admission ([`admit`]: a checkpoint's text validated and qualified), the
+//! match runner ([`matchrun`]) and the seeds they share ([`seeds`]).
 //!
 //! Modules import each other in one direction only: `seeds`, `planner`, `ik` and `controller` on
 //! `sim`; `observation` on those; `player` on `sim`; `checkpoint` and `scripted` on those;
-//! `factory` on `checkpoint` and `scripted`; `env`, `eval`, `matchrun` and `ppo` on top.
+//! `factory` on `checkpoint` and `scripted`; `env`, `eval`, `admit`, `matchrun` and `ppo` on top.
 //!
 //! Must never: speak HTTP or SQL (that is `server`), or change the physics (that is `sim`).
 //! Depends on `sim` only.
 #![forbid(unsafe_code)]
 
+pub mod admit;
 pub mod builtins;
 pub mod checkpoint;
 pub mod controller;

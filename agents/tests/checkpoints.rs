@@ -3,7 +3,9 @@
 
 use std::sync::Arc;
 
-use agents::checkpoint::{Activation, Checkpoint, MAX_PARAMETERS};
+use agents::checkpoint::{
+    Activation, Checkpoint, MAX_CURVE_POINTS, MAX_PARAMETERS, MAX_TRAINING_BYTES,
+};
 use agents::controller::{ControllerSpec, PdGains, Synergies};
 use agents::env::{Env, RewardWeights};
 use agents::eval::{evaluate, Evaluation};
@@ -108,6 +110,32 @@ fn bad_checkpoints_are_refused_naming_the_field() {
         Activation::Relu,
     );
     assert!(c.validate(&m).unwrap_err().message.contains("parameters"));
+    // A provenance anyone may read, kept small: the learning curve and the whole section.
+    let kmac_text = agents::builtins::checkpoint("kmac").expect("built in");
+    let trained: Checkpoint = serde_json::from_str(kmac_text).unwrap();
+    let mut c = trained.clone();
+    let t = c.training.as_mut().unwrap();
+    t.curve = t
+        .curve
+        .iter()
+        .cycle()
+        .take(MAX_CURVE_POINTS + 1)
+        .copied()
+        .collect();
+    refused(&m, &c, "training.curve");
+    let mut c = trained.clone();
+    c.training.as_mut().unwrap().note = Some("x".repeat(MAX_TRAINING_BYTES));
+    refused(&m, &c, "training");
+    let mut c = trained;
+    let t = c.training.as_mut().unwrap();
+    t.curve = t
+        .curve
+        .iter()
+        .cycle()
+        .take(MAX_CURVE_POINTS)
+        .copied()
+        .collect();
+    c.validate(&m).unwrap();
     // Unknown controller kind and unknown fields: serde's words, with line and column.
     let text = serde_json::to_string(&good)
         .unwrap()

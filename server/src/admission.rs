@@ -1,49 +1,157 @@
-//! Admission: a submitted (or built-in) checkpoint validated off the async threads within a budget,
-//! qualified on P2 serves, held to the thresholds; the built-in checkpoints registered at start.
+//! Admission: a submitted checkpoint validated and qualified in a child process under a CPU-time and
+//! a memory budget (`rally checkpoint admit`), held to the qualification thresholds; the built-in
+//! checkpoints registered at start (trusted: admitted in process).
 
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::process::Stdio;
+use std::time::Duration;
+
+use agents::admit::Admission;
+use agents::eval::EvalReport;
+use tokio::io::AsyncWriteExt;
 
 use crate::settings::{Settings, EMBEDDED_BUILTINS};
 use crate::state::AppState;
 use crate::{api, db};
 
-/// Why [`validate_checkpoint`] refused.
+/// Why a submitted checkpoint was not admitted.
 #[derive(Debug)]
 pub enum Refused {
-    /// The checkpoint is wrong: the field and what.
-    Invalid(agents::checkpoint::CheckpointError),
-    /// Validation ran past `validation_budget_s`.
-    OverBudget(f64),
+    /// Not a valid checkpoint of the server's model: the field and what.
+    Invalid(String),
+    /// Valid, but its network failed in the qualification.
+    Failed(String),
+    /// It used the CPU time `admission_cpu_s` allows (s), or its process ran past its wall-clock
+    /// bound ([`wall_bound`]).
+    OverCpu(f64),
+    /// It asked for more memory than `admission_memory_mb` allows (MiB; what failed).
+    OverMemory(u64, String),
+    /// Its admission process died otherwise (how).
+    Crashed(String),
 }
 
-/// Parses and validates a submitted checkpoint against the server's model on the blocking pool,
-/// one at a time, within `validation_budget_s` (its turn included). Past the budget the caller gets
-/// [`Refused::OverBudget`] at once; the work itself cannot be interrupted and finishes on its
-/// thread, holding the turn, so a flood of slow uploads queues rather than piling onto the CPU.
-pub async fn validate_checkpoint(
+/// The wall-clock bound on an admission process: four times its CPU budget and 10 s (its CPU
+/// limit ends it first unless it waits on nothing; this bounds a machine so loaded that it waits).
+pub fn wall_bound(settings: &Settings) -> Duration {
+    Duration::from_secs_f64(4.0 * settings.admission_cpu_s + 10.0)
+}
+
+/// Admits a submitted checkpoint: one admission at a time (each uses every core), in a child
+/// process of this executable (`rally checkpoint admit`) that limits its own CPU time
+/// (`admission_cpu_s`) and memory (`admission_memory_mb`), so a graph that allocates without
+/// bound or runs without end costs the server neither memory nor its threads. The outer error is
+/// the server's (the child could not be started), the inner one the checkpoint's.
+pub async fn admit_submission(
     state: &AppState,
     text: String,
-) -> anyhow::Result<Result<agents::checkpoint::Checkpoint, Refused>> {
-    let budget = state.settings.validation_budget_s;
-    let turn = state.validate.clone();
-    let model = state.model.clone();
-    let job = async move {
-        let permit = turn
-            .acquire_owned()
-            .await
-            .map_err(|e| anyhow::anyhow!("validation queue closed: {e}"))?;
-        tokio::task::spawn_blocking(move || {
-            let _permit = permit;
-            agents::checkpoint::Checkpoint::from_json(&text, &model)
-        })
+) -> anyhow::Result<Result<EvalReport, Refused>> {
+    let s = &state.settings;
+    let _turn = state
+        .admit
+        .acquire()
         .await
-        .map_err(|e| anyhow::anyhow!("checkpoint validation panicked: {e}"))
-    };
-    match tokio::time::timeout(std::time::Duration::from_secs_f64(budget), job).await {
-        Err(_) => Ok(Err(Refused::OverBudget(budget))),
-        Ok(r) => Ok(r?.map_err(Refused::Invalid)),
+        .map_err(|e| anyhow::anyhow!("admission queue closed: {e}"))?;
+    let exe = std::env::current_exe()
+        .map_err(|e| anyhow::anyhow!("the server's executable, to run the admission in: {e}"))?;
+    let mut child = tokio::process::Command::new(exe)
+        .args(["checkpoint", "admit", "--episodes"])
+        .arg(s.qualification_episodes.to_string())
+        .args(["--seed", "0", "--cpu-s"])
+        .arg(s.admission_cpu_s.to_string())
+        .arg("--memory-mb")
+        .arg(s.admission_memory_mb.to_string())
+        .env("RUST_LOG", "warn")
+        .env("RUST_BACKTRACE", "0")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .kill_on_drop(true)
+        .spawn()
+        .map_err(|e| anyhow::anyhow!("starting the admission process: {e}"))?;
+    if let Some(mut stdin) = child.stdin.take() {
+        // A child that died before reading all of it says why in its status.
+        tokio::spawn(async move {
+            let _ = stdin.write_all(text.as_bytes()).await;
+        });
     }
+    let Ok(out) = tokio::time::timeout(wall_bound(s), child.wait_with_output()).await else {
+        // Dropping the child killed it.
+        return Ok(Err(Refused::OverCpu(s.admission_cpu_s)));
+    };
+    let out = out.map_err(|e| anyhow::anyhow!("waiting for the admission process: {e}"))?;
+    Ok(judge(s, &out))
+}
+
+const SIGKILL: i32 = 9;
+const SIGXCPU: i32 = 24;
+
+/// What an admission process's exit and output say.
+fn judge(s: &Settings, out: &std::process::Output) -> Result<EvalReport, Refused> {
+    use std::os::unix::process::ExitStatusExt;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // Rust's own words when an allocation fails outside a place that can report it.
+    if let Some(line) = stderr.lines().find(|l| l.contains("memory allocation of")) {
+        return Err(Refused::OverMemory(
+            s.admission_memory_mb,
+            line.trim().into(),
+        ));
+    }
+    if out.status.success() {
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let line = stdout.lines().last().unwrap_or_default();
+        return match serde_json::from_str::<Admission>(line) {
+            Ok(a) => outcome(s, a),
+            Err(e) => Err(Refused::Crashed(format!(
+                "its admission process answered no outcome ({e})"
+            ))),
+        };
+    }
+    match out.status.signal() {
+        // SIGXCPU at the soft CPU limit, SIGKILL at the hard one a second later.
+        Some(sig) if sig == SIGXCPU || sig == SIGKILL => Err(Refused::OverCpu(s.admission_cpu_s)),
+        signal => {
+            let last = stderr.lines().rev().find(|l| !l.trim().is_empty());
+            Err(Refused::Crashed(format!(
+                "its admission process ended with {}{}",
+                match (signal, out.status.code()) {
+                    (Some(sig), _) => format!("signal {sig}"),
+                    (None, Some(code)) => format!("exit code {code}"),
+                    _ => "an unknown status".into(),
+                },
+                last.map(|l| format!(": {}", l.trim())).unwrap_or_default()
+            )))
+        }
+    }
+}
+
+fn outcome(s: &Settings, a: Admission) -> Result<EvalReport, Refused> {
+    match a {
+        Admission::Qualified { report } => Ok(*report),
+        Admission::Invalid { error } => Err(Refused::Invalid(error)),
+        Admission::Failed { error } => Err(Refused::Failed(error)),
+        Admission::OverMemory { error } => Err(Refused::OverMemory(s.admission_memory_mb, error)),
+    }
+}
+
+/// Admits a trusted checkpoint (a built-in) in this process, on the blocking pool, in turn with
+/// the submissions.
+async fn admit_builtin(state: &AppState, text: String) -> anyhow::Result<Admission> {
+    let eval = agents::eval::Evaluation {
+        model: state.model.clone(),
+        config: state.arena.clone(),
+        preset: sim::arena::MYOCHALLENGE,
+        kind: sim::serve::ServeKind::P2,
+        episodes: state.settings.qualification_episodes,
+        seed: 0,
+    };
+    let _turn = state
+        .admit
+        .acquire()
+        .await
+        .map_err(|e| anyhow::anyhow!("admission queue closed: {e}"))?;
+    tokio::task::spawn_blocking(move || agents::admit::admit(&text, &eval))
+        .await
+        .map_err(|e| anyhow::anyhow!("admission panicked: {e}"))
 }
 
 /// Whether a qualification report clears the admission thresholds (`qualification_min_hit_rate`,
@@ -80,30 +188,6 @@ pub fn admits(settings: &Settings, r: &agents::eval::EvalReport) -> Result<(), S
             short.join("; ")
         ))
     }
-}
-
-/// Qualifies an agent on `qualification_episodes` P2 serves (seed 0), one qualification at a time
-/// (each one already uses every core). The outer error is the server's, the inner one the agent's.
-pub async fn qualify(
-    state: &AppState,
-    spec: agents::factory::PlayerSpec,
-) -> anyhow::Result<Result<agents::eval::EvalReport, String>> {
-    let eval = agents::eval::Evaluation {
-        model: state.model.clone(),
-        config: state.arena.clone(),
-        preset: sim::arena::MYOCHALLENGE,
-        kind: sim::serve::ServeKind::P2,
-        episodes: state.settings.qualification_episodes,
-        seed: 0,
-    };
-    let _turn = state
-        .qualify
-        .acquire()
-        .await
-        .map_err(|e| anyhow::anyhow!("qualification queue closed: {e}"))?;
-    tokio::task::spawn_blocking(move || agents::eval::evaluate(&eval, &spec, &|| {}))
-        .await
-        .map_err(|e| anyhow::anyhow!("qualification panicked: {e}"))
 }
 
 /// Registers every checkpoint `settings.builtin_checkpoints` names that is not an agent yet, as a
@@ -164,29 +248,24 @@ pub(crate) async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Re
             }
             continue;
         }
-        let loaded = text.and_then(|text| {
-            agents::checkpoint::Checkpoint::from_json(&text, &state.model)
-                .map(|c| (text, c))
-                .map_err(|e| e.to_string())
-        });
-        let (text, checkpoint) = match loaded {
-            Ok(x) => x,
+        let text = match text {
+            Ok(text) => text,
             Err(e) => {
                 tracing::warn!(%path, "built-in checkpoint skipped: {e}");
                 continue;
             }
         };
-        let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
-        let report = match qualify(state, spec)
-            .await?
-            .and_then(|r| admits(&state.settings, &r).map(|()| r))
-        {
-            Ok(r) => r,
-            Err(e) => {
-                tracing::warn!(%name, "built-in checkpoint did not qualify: {e}");
+        let report = match admit_builtin(state, text.clone()).await? {
+            Admission::Qualified { report } => *report,
+            other => {
+                tracing::warn!(%path, "built-in checkpoint skipped: {other:?}");
                 continue;
             }
         };
+        if let Err(e) = admits(&state.settings, &report) {
+            tracing::warn!(%name, "built-in checkpoint did not qualify: {e}");
+            continue;
+        }
         let qual = (
             report.episodes,
             report.hit_rate.value,

@@ -38,7 +38,7 @@ mod tests {
     }
 
     /// Every JSON answer of the document has a schema, and the schemas are the `wire` types' own
-    /// (`RALLY_UPDATE_OPENAPI=1 cargo test -p server openapi` rewrites them from the types).
+    /// (`RALLY_UPDATE_OPENAPI=1 cargo test -p server every_answer` rewrites them from the types).
     #[test]
     fn every_answer_has_a_schema_and_the_schemas_are_the_wire_types() {
         let mut v: serde_json::Value = serde_json::from_str(super::OPENAPI).expect("valid JSON");
@@ -56,7 +56,7 @@ mod tests {
         for (name, schema) in &generated {
             assert_eq!(
                 &v["components"]["schemas"][name], schema,
-                "the schema of {name} is not the wire type's: RALLY_UPDATE_OPENAPI=1 rewrites it"
+                "the schema of {name} is not the wire type's: RALLY_UPDATE_OPENAPI=1 cargo test -p server every_answer rewrites it"
             );
         }
         let mut missing = Vec::new();

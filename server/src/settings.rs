@@ -40,10 +40,13 @@ pub struct Settings {
     pub qualification_min_hit_rate: f64,
     /// Largest share of the qualification's episodes in which an agent may drop its paddle.
     pub qualification_max_dropped: f64,
-    /// The longest a submitted checkpoint's validation (parsing, checking, building its network —
-    /// an ONNX graph is optimised by tract) may take, waiting for its turn included, s: past it the
-    /// submission is refused (422 naming this setting).
-    pub validation_budget_s: f64,
+    /// CPU time a submitted checkpoint's admission (validation, its network built — tract optimises
+    /// an ONNX graph — and the qualification episodes) may use, s, all threads together: past it
+    /// its process is stopped and the submission refused (422 naming this setting).
+    pub admission_cpu_s: f64,
+    /// Memory a submitted checkpoint's admission process may allocate, MiB: past it its
+    /// allocations fail and the submission is refused (422 naming this setting).
+    pub admission_memory_mb: u64,
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
     /// Admin token (the `RALLY_ADMIN_TOKEN` environment variable overrides it); empty disables
@@ -54,6 +57,12 @@ pub struct Settings {
     pub max_matches_per_minute: u32,
     /// Most matches one tournament may queue.
     pub max_tournament_matches: u32,
+    /// Replay frames a submitter token's matches may keep, MiB (compressed): past it a match it
+    /// asked for keeps none, and its rallies are re-simulated when watched.
+    pub replay_quota_mb: f64,
+    /// Rallies a submitter token may ask for per hour: a match's, all of a tournament's matches',
+    /// the most an SPRT may play (its `max_matches` times its rallies per match).
+    pub max_rallies_per_hour: u32,
     /// Agents a submitter token may submit per hour (each one is qualified on
     /// `qualification_episodes` episodes); the admin token is not limited.
     pub max_agents_per_hour: u32,
@@ -161,7 +170,7 @@ impl Settings {
         for (name, v) in [
             ("header_read_timeout_s", s.header_read_timeout_s),
             ("shutdown_deadline_s", s.shutdown_deadline_s),
-            ("validation_budget_s", s.validation_budget_s),
+            ("admission_cpu_s", s.admission_cpu_s),
         ] {
             if !(v.is_finite() && v > 0.0 && v <= 86_400.0) {
                 return Err(format!(
@@ -174,6 +183,15 @@ impl Settings {
         }
         if !(s.continuous_pause_s.is_finite() && s.continuous_pause_s >= 0.0) {
             return Err("continuous_pause_s must be a non-negative number of seconds".into());
+        }
+        if !(s.replay_quota_mb.is_finite() && s.replay_quota_mb >= 0.0) {
+            return Err("replay_quota_mb must be a non-negative number of MiB".into());
+        }
+        if s.max_rallies_per_hour == 0 {
+            return Err("max_rallies_per_hour must be positive".into());
+        }
+        if !(16..=1 << 30).contains(&s.admission_memory_mb) {
+            return Err("admission_memory_mb must be between 16 and 2^30 MiB".into());
         }
         if s.max_matches_per_minute == 0 {
             return Err("max_matches_per_minute must be positive".into());

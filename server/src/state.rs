@@ -31,10 +31,9 @@ pub struct AppState {
     pub board: Arc<tokio::sync::Mutex<Option<CachedBoard>>>,
     /// What each submitter token spent of its budgets recently (when, how much).
     pub rate: Arc<std::sync::Mutex<RateLog>>,
-    /// One qualification at a time: submissions wait their turn instead of piling up on the CPU.
-    pub qualify: Arc<tokio::sync::Semaphore>,
-    /// One checkpoint validation at a time, off the async threads ([`validate_checkpoint`]).
-    pub validate: Arc<tokio::sync::Semaphore>,
+    /// One admission (a checkpoint validated and qualified) at a time: submissions wait their
+    /// turn instead of piling up on the CPU ([`crate::admission::admit_submission`]).
+    pub admit: Arc<tokio::sync::Semaphore>,
     /// What changed, for the event stream's subscribers.
     pub events: tokio::sync::broadcast::Sender<ServerEvent>,
     /// Running matches that can be watched live: the frames of the rally being played (with body
@@ -49,6 +48,9 @@ pub struct AppState {
     /// (set when it is cancelled: here by the API, or seen by the heartbeat).
     pub playing:
         Arc<std::sync::Mutex<std::collections::HashMap<i64, Arc<std::sync::atomic::AtomicBool>>>>,
+    /// Set when a shutdown's deadline passed with matches still playing: they were stopped at the
+    /// end of their rally, and go back to the queue instead of failing.
+    pub shutting_down: Arc<std::sync::atomic::AtomicBool>,
 }
 
 /// The budgets a submitter token spends.
@@ -56,13 +58,15 @@ pub struct AppState {
 pub enum Budget {
     /// Matches queued, per minute.
     Matches,
+    /// Rallies asked for (those of a tournament's matches, the most an SPRT may play), per hour.
+    Rallies,
     /// Agents submitted, per hour.
     Agents,
 }
 
 /// Per (submitter token id, budget), the (time, amount) of its recent requests.
 pub type RateLog =
-    std::collections::HashMap<(i64, Budget), std::collections::VecDeque<(std::time::Instant, u32)>>;
+    std::collections::HashMap<(i64, Budget), std::collections::VecDeque<(std::time::Instant, u64)>>;
 
 impl AppState {
     /// Publishes an event to every subscriber; never waits (a subscriber that lags loses the oldest
@@ -83,6 +87,22 @@ impl AppState {
             f.store(true, std::sync::atomic::Ordering::SeqCst);
         }
         flag.is_some()
+    }
+
+    /// Stops every match this process plays at the end of its rally, to be queued again: a
+    /// shutdown's deadline passed. Returns how many.
+    pub fn stop_all_playing(&self) -> usize {
+        self.shutting_down
+            .store(true, std::sync::atomic::Ordering::SeqCst);
+        let playing = self
+            .playing
+            .lock()
+            .map(|p| p.values().cloned().collect::<Vec<_>>());
+        let flags = playing.unwrap_or_default();
+        for f in &flags {
+            f.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+        flags.len()
     }
 
     /// Publishes that agent `id` was registered (see [`AppState::publish_match`]).
@@ -119,12 +139,12 @@ pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
         wake: Arc::new(Notify::new()),
         board: Arc::new(tokio::sync::Mutex::new(None)),
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
-        qualify: Arc::new(tokio::sync::Semaphore::new(1)),
-        validate: Arc::new(tokio::sync::Semaphore::new(1)),
+        admit: Arc::new(tokio::sync::Semaphore::new(1)),
         events: tokio::sync::broadcast::channel(EVENT_BUFFER).0,
         live: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),
         players,
         playing: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
+        shutting_down: Arc::new(std::sync::atomic::AtomicBool::new(false)),
     })
 }

@@ -74,6 +74,26 @@ enum CheckpointCommand {
         #[arg(long)]
         note: Option<String>,
     },
+    /// The server's admission of a submitted checkpoint, in a process of its own: reads the
+    /// checkpoint from standard input, sets its own CPU-time and memory limits, validates it against
+    /// the robot (`--model`) and plays the qualification; prints the outcome as one JSON line
+    /// (`agents::admit::Admission`). Past the CPU limit the kernel stops it (SIGXCPU); past the
+    /// memory limit its allocations fail. `rally serve` runs it for every upload.
+    #[command(hide = true)]
+    Admit {
+        /// Qualification episodes (P2 serves).
+        #[arg(long, default_value_t = 100)]
+        episodes: usize,
+        /// Qualification seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// CPU time this process may use, all threads together, s (rounded up to whole seconds).
+        #[arg(long)]
+        cpu_s: f64,
+        /// Memory it may allocate (its data segment and anonymous mappings), MiB.
+        #[arg(long)]
+        memory_mb: u64,
+    },
 }
 
 /// Runs `rally checkpoint`.
@@ -95,6 +115,12 @@ pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
             out,
             note,
         } => scale_noise(&model, file, *factor, name.as_deref(), out, note.as_deref()),
+        CheckpointCommand::Admit {
+            episodes,
+            seed,
+            cpu_s,
+            memory_mb,
+        } => admit(model, *episodes, *seed, *cpu_s, *memory_mb),
     }
 }
 
@@ -172,6 +198,46 @@ fn validate(model: &Model, file: &Path) -> Result<(), CliError> {
             None => "ONNX network".to_string(),
         }
     );
+    Ok(())
+}
+
+/// `rally checkpoint admit`: limits itself, reads the checkpoint from standard input, prints the
+/// admission's outcome.
+fn admit(
+    model: std::sync::Arc<Model>,
+    episodes: usize,
+    seed: u64,
+    cpu_s: f64,
+    memory_mb: u64,
+) -> Result<(), CliError> {
+    use rlimit::Resource;
+    if !(cpu_s.is_finite() && cpu_s > 0.0) || memory_mb == 0 {
+        return Err(CliError::Usage(
+            "--cpu-s and --memory-mb must be positive".into(),
+        ));
+    }
+    // The soft CPU limit sends SIGXCPU (which ends the process), the hard one a second later SIGKILL.
+    let cpu = cpu_s.ceil() as u64;
+    Resource::CPU
+        .set(cpu, cpu + 1)
+        .map_err(|e| CliError::Failed(anyhow::anyhow!("setting the CPU-time limit: {e}")))?;
+    let bytes = memory_mb.saturating_mul(1 << 20);
+    Resource::DATA
+        .set(bytes, bytes)
+        .map_err(|e| CliError::Failed(anyhow::anyhow!("setting the memory limit: {e}")))?;
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut std::io::stdin().lock(), &mut text)?;
+    let eval = agents::eval::Evaluation {
+        model,
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        kind: sim::serve::ServeKind::P2,
+        episodes,
+        seed,
+    };
+    let outcome = agents::admit::admit(&text, &eval);
+    let line = serde_json::to_string(&outcome).map_err(|e| CliError::Failed(e.into()))?;
+    println!("{line}");
     Ok(())
 }
 

@@ -363,3 +363,55 @@ pub fn terminate(p: &mut Server) -> std::process::ExitStatus {
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+
+/// The server process's resident memory, KiB (Linux's `/proc`).
+pub fn rss_kib(srv: &Server) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{}/status", srv.child.id())).unwrap();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .expect("VmRSS in /proc/PID/status")
+}
+
+/// How long `GET /api/v1/healthz` takes on an idle server: the slowest of ten.
+pub fn healthz_idle(addr: &str) -> Duration {
+    (0..10)
+        .map(|_| {
+            let t = Instant::now();
+            let (code, _) = raw(addr, "GET", "/api/v1/healthz", &[], b"");
+            assert_eq!(code, 200);
+            t.elapsed()
+        })
+        .max()
+        .unwrap()
+}
+
+/// The longest a busy server's `/healthz` may take, against its idle figure: 20 times it and half a
+/// second (a busy 2-core machine shares its cores with the work; a blocked runtime takes seconds).
+pub fn responsive_bound(idle: Duration) -> Duration {
+    idle * 20 + Duration::from_millis(500)
+}
+
+/// Runs `work` while another thread asks `/healthz` every 50 ms; returns what `work` returned and
+/// the slowest answer meanwhile (each must be a 200).
+pub fn while_probing<T>(addr: &str, work: impl FnOnce() -> T) -> (T, Duration) {
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let probe = {
+        let (addr, stop) = (addr.to_string(), stop.clone());
+        std::thread::spawn(move || {
+            let mut worst = Duration::ZERO;
+            while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+                let t = Instant::now();
+                let (code, _) = raw(&addr, "GET", "/api/v1/healthz", &[], b"");
+                assert_eq!(code, 200);
+                worst = worst.max(t.elapsed());
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            worst
+        })
+    };
+    let out = work();
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    (out, probe.join().unwrap())
+}

@@ -1,5 +1,5 @@
-//! What becomes an agent and what the leaderboard shows: qualification thresholds, the validation
-//! budget, retirement, built-ins that do not load, and every leaderboard row against its agent page.
+//! What becomes an agent and what the leaderboard shows: qualification thresholds, the admission
+//! budgets, retirement, built-ins that do not load, and every leaderboard row against its agent page.
 
 use super::*;
 
@@ -52,35 +52,77 @@ fn junk_below_the_qualification_thresholds_is_refused_and_a_trained_agent_admitt
     assert!(sub.qualification.hit_rate.value >= 0.3);
 }
 
-#[test]
-fn a_validation_past_its_budget_is_refused_and_the_server_keeps_answering() {
-    // An ONNX checkpoint (tract optimises its graph to validate it) under a 1 ms budget.
+/// A checkpoint of the template's shape whose network is `onnx`.
+fn onnx_checkpoint(name: &str, onnx: &[u8]) -> Value {
     use base64::Engine;
+    let mut ck = template(name);
+    ck.as_object_mut().unwrap().remove("policy");
+    ck["onnx"] = json!({"model_base64": base64::engine::general_purpose::STANDARD.encode(onnx)});
+    ck
+}
+
+#[test]
+fn uploads_past_the_admission_budgets_are_refused_and_the_server_keeps_answering() {
     let dir = tempdir("budget");
     let srv = start_with(
         &dir,
         false,
-        "builtin_checkpoints = \"\"\nvalidation_budget_s = 0.001\nmax_body_bytes = 8388608\n",
+        "builtin_checkpoints = \"\"\nadmission_cpu_s = 2.0\nadmission_memory_mb = 512\nqualification_min_hit_rate = 0.3\n\
+         max_body_bytes = 8388608\n",
     );
     let a = srv.addr.as_str();
-    let mut ck = template("slow");
-    ck.as_object_mut().unwrap().remove("policy");
-    ck["onnx"] = json!({"model_base64": base64::engine::general_purpose::STANDARD
-        .encode(include_bytes!("../../agents/tests/fixtures/policy.onnx"))});
-    let body = json!({"name": "slow", "checkpoint": ck});
-    let (code, v) = call(a, "POST", "/api/v1/agents", Some(&body), Some(TOKEN));
-    assert_eq!(code, 422, "{v}");
-    assert_eq!(v["error"]["code"], "over_budget", "{v}");
-    assert!(
-        v["error"]["message"]
-            .as_str()
-            .unwrap()
-            .contains("validation_budget_s"),
-        "{v}"
-    );
-    let (code, _) = call(a, "GET", "/api/v1/healthz", None, None);
-    assert_eq!(code, 200);
-    let list: AgentList = get_as(a, "/api/v1/agents");
+    let idle = healthz_idle(a);
+    let rss_before = rss_kib(&srv);
+    let fixtures: [(&str, &[u8], &str, &str); 3] = [
+        // 2 000 chained matrix products a call: past its CPU time.
+        (
+            "slow",
+            include_bytes!("../../agents/tests/fixtures/policy_slow.onnx"),
+            "over_budget",
+            "admission_cpu_s",
+        ),
+        // A 4 GB tensor from a computed shape: past its memory.
+        (
+            "computed-big",
+            include_bytes!("../../agents/tests/fixtures/policy_computed_big.onnx"),
+            "over_budget",
+            "admission_memory_mb",
+        ),
+        // 13 actions for the zero observation, more for others: its actions are refused in play
+        // (each episode ends at once), never indexed past: it qualifies for nothing.
+        (
+            "variable-width",
+            include_bytes!("../../agents/tests/fixtures/policy_variable_width.onnx"),
+            "below_qualification",
+            "hit 0 of 6",
+        ),
+    ];
+    for (name, onnx, code_word, says) in fixtures {
+        let body = json!({"name": name, "checkpoint": onnx_checkpoint(name, onnx)});
+        let started = Instant::now();
+        let ((code, v), worst) = while_probing(a, || {
+            call(a, "POST", "/api/v1/agents", Some(&body), Some(TOKEN))
+        });
+        eprintln!(
+            "{name}: {code} in {:?}; /healthz idle {idle:?}, at worst {worst:?} meanwhile",
+            started.elapsed()
+        );
+        assert_eq!(
+            (code, v["error"]["code"].as_str()),
+            (422, Some(code_word)),
+            "{v}"
+        );
+        let message = v["error"]["message"].as_str().unwrap();
+        assert!(message.contains(says), "{name}: {message}");
+        assert!(
+            worst < responsive_bound(idle),
+            "{name}: /healthz took {worst:?}"
+        );
+    }
+    // The memory went to the admission's process, not the server's.
+    let grew_mib = rss_kib(&srv).saturating_sub(rss_before) / 1024;
+    assert!(grew_mib < 256, "the server grew by {grew_mib} MiB");
+    let list: AgentList = get_as(a, "/api/v1/agents?all=1");
     assert!(
         list.agents.iter().all(|x| x.builtin),
         "nothing stored: {list:?}"

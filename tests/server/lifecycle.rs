@@ -426,6 +426,33 @@ fn sigterm_shuts_down_gracefully_and_loses_nothing() {
 }
 
 #[test]
+fn sigterm_past_its_deadline_queues_a_long_match_again() {
+    let dir = tempdir("sigterm_deadline");
+    let mut srv = start_serve(&dir, 1, false, "shutdown_deadline_s = 1.0\n");
+    let q = QueueMatch {
+        a: "kmac-rally".into(),
+        b: "kmac-rally".into(),
+        rallies: 1000,
+        seed: Some(5),
+    };
+    let m: db::Match = post_as(&srv.addr, "/api/v1/matches", &q, Some(TOKEN), 202);
+    wait_for(&srv.addr, m.id, "running", Duration::from_secs(30));
+    let asked = Instant::now();
+    let status = terminate(&mut srv);
+    let took = asked.elapsed();
+    eprintln!("exited {took:?} after SIGTERM");
+    assert!(status.success(), "exit status {status:?}");
+    // The deadline (1 s) and the rally being played, not the minutes the match would take.
+    assert!(took < Duration::from_secs(15), "{took:?}");
+    drop(srv);
+    // Queued again, nothing of it stored; played from its start by the next worker.
+    let srv = start_serve(&dir, 0, false, "");
+    let again: MatchDetail = get_as(&srv.addr, &format!("/api/v1/matches/{}", m.id));
+    assert_eq!(again.row.status, MatchStatus::Queued, "{again:?}");
+    assert!(again.rally_log.is_empty(), "{again:?}");
+}
+
+#[test]
 fn the_event_stream_tells_a_match_queued_running_and_done() {
     let dir = tempdir("events");
     let srv = start_with(&dir, false, "builtin_checkpoints = \"\"\n");

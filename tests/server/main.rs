@@ -29,6 +29,8 @@ mod cancel;
 mod contests;
 mod edge;
 mod lifecycle;
+mod load;
+mod quotas;
 
 fn template(name: &str) -> Value {
     let out = Command::new(env!("CARGO_BIN_EXE_rally"))

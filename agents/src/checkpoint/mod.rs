@@ -26,6 +26,13 @@ pub const FORMAT: &str = "muscle-rally-checkpoint";
 pub const VERSION: u32 = 2;
 /// Largest checkpoint file accepted, bytes.
 pub const MAX_BYTES: usize = 64 << 20;
+
+/// The most points a checkpoint's learning curve may have (`rally train` writes at most ~200), and
+/// the most bytes its whole `training` section may take as JSON: the provenance an agent's page
+/// shows to anyone, kept small.
+pub const MAX_CURVE_POINTS: usize = 1000;
+/// See [`MAX_CURVE_POINTS`].
+pub const MAX_TRAINING_BYTES: usize = 256 << 10;
 /// Most parameters accepted.
 pub const MAX_PARAMETERS: usize = 4_000_000;
 
@@ -234,6 +241,21 @@ impl Checkpoint {
         }
         if self.name.trim().is_empty() || self.name.len() > 100 {
             return Err(bad("name", "must be 1 to 100 characters"));
+        }
+        if let Some(t) = &self.training {
+            if t.curve.len() > MAX_CURVE_POINTS {
+                return Err(bad(
+                    "training.curve",
+                    format!("{} points; at most {MAX_CURVE_POINTS}", t.curve.len()),
+                ));
+            }
+            let bytes = serde_json::to_string(t).map_or(usize::MAX, |s| s.len());
+            if bytes > MAX_TRAINING_BYTES {
+                return Err(bad(
+                    "training",
+                    format!("{bytes} bytes of JSON; at most {MAX_TRAINING_BYTES}"),
+                ));
+            }
         }
         Ok(())
     }

@@ -274,7 +274,8 @@ pub const MAX_TENSOR_BYTES: usize = 64 << 20;
 /// tract evaluates such nodes while it reads the graph (constants are folded as soon as their
 /// inputs are known), so a few hundred bytes of file could take gigabytes before any check on the
 /// typed graph: the shapes are read from the file first. (A shape computed from constants by other
-/// nodes is not followed; `validation_budget_s` bounds the time such a graph may take.)
+/// nodes is not followed: the server admits a submission in a process whose memory and CPU time
+/// are limited, which bounds such a graph.)
 fn oversized_generator(g: &tract_onnx::pb::GraphProto) -> Option<(String, usize)> {
     let shape_of = |name: &str| -> Option<Vec<i64>> {
         let t = g.initializer.iter().find(|t| t.name == name)?;

@@ -54,14 +54,9 @@ pub(super) async fn get_agent(
     let a = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
-    // A trained checkpoint's provenance and learning curve, as the checkpoint carries them.
-    let training = match db::agent_spec(&s.pool, id).await? {
-        Some((db::AgentKind::Checkpoint, spec)) => serde_json::from_str::<Value>(&spec)
-            .ok()
-            .and_then(|c| c.get("training").cloned())
-            .filter(|t| !t.is_null()),
-        _ => None,
-    };
+    // A trained checkpoint's provenance and learning curve, as the checkpoint carries them (kept
+    // apart from its weights: a few kilobytes to read, not the checkpoint).
+    let training = db::agent_training(&s.pool, id).await?;
     Ok(Json(wire::AgentDetail {
         row: a,
         drift: db::agent_drift_summary(&s.pool, id).await?,
@@ -91,8 +86,17 @@ pub fn check_name(name: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// `POST /agents` as the server reads it: [`wire::SubmitAgent`] with the checkpoint kept as the text
+/// it was sent (checked to be JSON, but no tree of it built: its admission process parses it).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct Submission {
+    name: String,
+    checkpoint: Box<serde_json::value::RawValue>,
+}
+
 /// Reads a multipart submission: a `name` text field and a `checkpoint` file (the checkpoint JSON).
-pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<wire::SubmitAgent> {
+pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<Submission> {
     let bad_part = |e: MultipartError| ApiError::new(e.status(), "bad_multipart", e.body_text());
     let (mut name, mut checkpoint) = (None, None);
     while let Some(field) = form.next_field().await.map_err(bad_part)? {
@@ -100,14 +104,15 @@ pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<wire::Submi
             "name" => name = Some(field.text().await.map_err(bad_part)?),
             "checkpoint" => {
                 let bytes = field.bytes().await.map_err(bad_part)?;
-                let v: Value = serde_json::from_slice(&bytes).map_err(|e| ApiError {
-                    field: Some("checkpoint".into()),
-                    ..ApiError::new(
-                        StatusCode::UNPROCESSABLE_ENTITY,
-                        "invalid_checkpoint",
-                        format!("the checkpoint file is not JSON: {e}"),
-                    )
-                })?;
+                let v: Box<serde_json::value::RawValue> =
+                    serde_json::from_slice(&bytes).map_err(|e| ApiError {
+                        field: Some("checkpoint".into()),
+                        ..ApiError::new(
+                            StatusCode::UNPROCESSABLE_ENTITY,
+                            "invalid_checkpoint",
+                            format!("the checkpoint file is not JSON: {e}"),
+                        )
+                    })?;
                 checkpoint = Some(v);
             }
             other => {
@@ -126,7 +131,7 @@ pub(super) async fn read_multipart(mut form: Multipart) -> ApiResult<wire::Submi
             format!("the form has no '{f}' field"),
         )
     };
-    Ok(wire::SubmitAgent {
+    Ok(Submission {
         name: name.ok_or_else(|| missing("name"))?,
         checkpoint: checkpoint.ok_or_else(|| missing("checkpoint"))?,
     })
@@ -145,7 +150,7 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
             .map_err(|e| ApiError::new(e.status(), "bad_multipart", e.body_text()))?;
         read_multipart(form).await?
     } else {
-        let Json(body) = Json::<wire::SubmitAgent>::from_request(req, &s).await?;
+        let Json(body) = Json::<Submission>::from_request(req, &s).await?;
         body
     };
     check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;
@@ -153,47 +158,42 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     if let Some(a) = db::agent_by_name(&s.pool, &body.name).await? {
         return Err(ApiError::name_taken("an agent", &a.name));
     }
-    let text = body.checkpoint.to_string();
-    let checkpoint = match crate::admission::validate_checkpoint(&s, text.clone()).await? {
-        Ok(c) => c,
-        Err(crate::admission::Refused::Invalid(e)) => {
-            return Err(ApiError {
-                field: Some("checkpoint".into()),
-                ..ApiError::new(
-                    StatusCode::UNPROCESSABLE_ENTITY,
-                    "invalid_checkpoint",
-                    e.to_string(),
-                )
-            })
+    let text = body.checkpoint.get().to_string();
+    charge(&s, caller, &[(Budget::Agents, 1)])?;
+    let refused = |code: &'static str, message: String| ApiError {
+        field: Some("checkpoint".into()),
+        ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, code, message)
+    };
+    use crate::admission::Refused;
+    let mut report = match crate::admission::admit_submission(&s, text.clone()).await? {
+        Ok(report) => report,
+        Err(Refused::Invalid(e)) => return Err(refused("invalid_checkpoint", e)),
+        Err(Refused::Failed(e)) => return Err(refused("qualification_failed", e)),
+        Err(Refused::Crashed(e)) => return Err(refused("invalid_checkpoint", e)),
+        Err(Refused::OverCpu(budget)) => {
+            return Err(refused(
+                "over_budget",
+                format!(
+                    "admitting the checkpoint (validating it, building its network, playing its \
+                     qualification) used more than the server's admission_cpu_s ({budget} s of CPU \
+                     time)"
+                ),
+            ))
         }
-        Err(crate::admission::Refused::OverBudget(budget)) => {
-            return Err(ApiError {
-                field: Some("checkpoint".into()),
-                ..ApiError::new(
-                    StatusCode::UNPROCESSABLE_ENTITY,
-                    "over_budget",
-                    format!(
-                        "validating the checkpoint (building its network) took longer than the \
-                         server's validation_budget_s ({budget} s)"
-                    ),
-                )
-            })
+        Err(Refused::OverMemory(budget, what)) => {
+            return Err(refused(
+                "over_budget",
+                format!(
+                    "admitting the checkpoint asked for more memory than the server's \
+                     admission_memory_mb ({budget} MiB): {what}"
+                ),
+            ))
         }
     };
-    charge(&s, caller, Budget::Agents, 1)?;
-    let spec = ::agents::factory::PlayerSpec::Checkpoint(Arc::new(checkpoint));
-    let mut report = crate::admission::qualify(&s, spec)
-        .await?
-        .map_err(|e| ApiError {
-            field: Some("checkpoint".into()),
-            ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "qualification_failed", e)
-        })?;
     // The report names the agent as submitted (not the checkpoint's inner name).
     report.agent = body.name.clone();
-    crate::admission::admits(&s.settings, &report).map_err(|e| ApiError {
-        field: Some("checkpoint".into()),
-        ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "below_qualification", e)
-    })?;
+    crate::admission::admits(&s.settings, &report)
+        .map_err(|e| refused("below_qualification", e))?;
     let qual = (
         report.episodes,
         report.hit_rate.value,

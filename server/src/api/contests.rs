@@ -62,7 +62,15 @@ pub(super) async fn create_tournament(
             format!("agent '{}' is listed twice", dup.name),
         ));
     }
-    charge(&s, caller, Budget::Matches, pairs.len() as u32)?;
+    let rallies = pairs.len() as u64 * u64::from(t.rallies_per_match);
+    charge(
+        &s,
+        caller,
+        &[
+            (Budget::Matches, pairs.len() as u64),
+            (Budget::Rallies, rallies),
+        ],
+    )?;
     let plan = db::TournamentPlan {
         kind,
         agents: &agents,
@@ -219,7 +227,9 @@ pub(super) async fn create_sprt(
     if a.id == b.id {
         return Err(ApiError::bad("b", "an SPRT needs two different agents"));
     }
-    charge(&s, caller, Budget::Matches, 1)?;
+    // Its first match is queued now; it may play up to max_matches of them.
+    let most = u64::from(t.max_matches) * u64::from(t.rallies_per_match);
+    charge(&s, caller, &[(Budget::Matches, 1), (Budget::Rallies, most)])?;
     let params = db::SprtParams {
         elo0: t.elo0,
         elo1: t.elo1,

@@ -91,7 +91,14 @@ pub(super) async fn queue_match(
     let seed = seed_or_clock(q.seed)?;
     let a = agent_or_404(&s, &q.a, "a").await?;
     let b = agent_or_404(&s, &q.b, "b").await?;
-    charge(&s, caller, Budget::Matches, 1)?;
+    charge(
+        &s,
+        caller,
+        &[
+            (Budget::Matches, 1),
+            (Budget::Rallies, u64::from(q.rallies)),
+        ],
+    )?;
     let origin = db::Origin {
         created_by: submitter(caller),
         ..db::Origin::default()
@@ -218,15 +225,16 @@ pub(super) async fn get_replay(
             format!("match {id} has rallies 0 to {}", m.rallies - 1),
         ));
     }
+    // The frames: stored (compressed) or re-simulated (JSON).
     let (frames, resimulated) = if m.keep_replay {
-        let frames = db::replay(&s.pool, id, rally).await?.ok_or_else(|| {
+        let gz = db::replay(&s.pool, id, rally).await?.ok_or_else(|| {
             ApiError::new(
                 StatusCode::NOT_FOUND,
                 "not_found",
                 "no replay stored for that rally",
             )
         })?;
-        (frames, false)
+        (Err(gz), false)
     } else {
         // Continuous-mode and SPRT matches keep no frames: rallies are independent and deterministic,
         // so the rally is re-simulated (bit-identical to the one played), a few at a time.
@@ -256,14 +264,19 @@ pub(super) async fn get_replay(
         .map_err(|e| anyhow::anyhow!("re-simulation panicked: {e}"))?
         .map_err(|e| ApiError::new(StatusCode::CONFLICT, "not_replayable", e))?;
         let json = serde_json::to_string(&frames).map_err(|e| anyhow::anyhow!("{e}"))?;
-        (json, true)
+        (Ok(json), true)
     };
     let model = s.model.clone();
-    let frames =
-        tokio::task::spawn_blocking(move || crate::replay::with_body_poses(&model, &frames))
-            .await
-            .map_err(|e| anyhow::anyhow!("replay poses panicked: {e}"))?
-            .map_err(|e| anyhow::anyhow!("stored replay unreadable: {e}"))?;
+    let frames = tokio::task::spawn_blocking(move || {
+        let json = match frames {
+            Ok(json) => json,
+            Err(gz) => db::gunzip(&gz).map_err(|e| e.to_string())?,
+        };
+        crate::replay::with_body_poses(&model, &json).map_err(|e| e.to_string())
+    })
+    .await
+    .map_err(|e| anyhow::anyhow!("replay poses panicked: {e}"))?
+    .map_err(|e| anyhow::anyhow!("stored replay unreadable: {e}"))?;
     let body = format!(
         "{{\"match\":{id},\"rally\":{rally},\"hz\":{},\"resimulated\":{resimulated},\"frames\":{frames}}}",
         ::agents::matchrun::REPLAY_HZ

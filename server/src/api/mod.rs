@@ -1,8 +1,6 @@
 //! The REST API under `/api/v1` (JSON), the leaderboard page at `/`, and the error contract: every
 //! rejected request gets a 4xx with `{"error": {"code", "message", "field"}}` and writes nothing.
 
-use std::sync::Arc;
-
 use axum::extract::multipart::MultipartError;
 use axum::extract::rejection::JsonRejection;
 use axum::extract::{DefaultBodyLimit, FromRequest, Multipart, Path, Request, State};
@@ -206,25 +204,55 @@ async fn check_token(s: &AppState, headers: &HeaderMap) -> ApiResult<Caller> {
     }
 }
 
-/// Refuses a submitter token that would go over a budget — `max_matches_per_minute` matches queued
-/// or `max_agents_per_hour` agents submitted — with 429 and `Retry-After`; otherwise books `n`.
-/// The admin is not limited.
-fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()> {
+/// Refuses a submitter token that would go over a budget — `max_matches_per_minute` matches queued,
+/// `max_rallies_per_hour` rallies asked for, `max_agents_per_hour` agents submitted — with 429 and
+/// `Retry-After`; otherwise books every amount of `spend` (all or none). The admin is not limited.
+fn charge(s: &AppState, caller: Caller, spend: &[(Budget, u64)]) -> ApiResult<()> {
     let Caller::Submitter(token) = caller else {
         return Ok(());
     };
+    let now = std::time::Instant::now();
+    let mut log = s.rate.lock().unwrap_or_else(|e| e.into_inner());
+    for &(budget, n) in spend {
+        over_budget(s, &mut log, token, budget, n, now)?;
+    }
+    for &(budget, n) in spend {
+        log.entry((token, budget)).or_default().push_back((now, n));
+    }
+    Ok(())
+}
+
+/// The 429 for `token` spending `n` more of `budget` now, if it would go over; forgets spending
+/// older than the budget's window.
+fn over_budget(
+    s: &AppState,
+    log: &mut crate::state::RateLog,
+    token: i64,
+    budget: Budget,
+    n: u64,
+    now: std::time::Instant,
+) -> ApiResult<()> {
     // (limit, window in seconds, verb, its past tense, noun, the window in words)
+    let settings = &s.settings;
     let (limit, window, verb, done, noun, per) = match budget {
         Budget::Matches => (
-            s.settings.max_matches_per_minute,
+            u64::from(settings.max_matches_per_minute),
             60,
             "queue",
             "queued",
             "matches",
             "minute",
         ),
+        Budget::Rallies => (
+            u64::from(settings.max_rallies_per_hour),
+            3600,
+            "ask for",
+            "asked for",
+            "rallies",
+            "hour",
+        ),
         Budget::Agents => (
-            s.settings.max_agents_per_hour,
+            u64::from(settings.max_agents_per_hour),
             3600,
             "submit",
             "submitted",
@@ -243,9 +271,7 @@ fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()>
             window,
         ));
     }
-    let now = std::time::Instant::now();
     let window_d = std::time::Duration::from_secs(window);
-    let mut log = s.rate.lock().unwrap_or_else(|e| e.into_inner());
     let mine = log.entry((token, budget)).or_default();
     while mine
         .front()
@@ -253,7 +279,7 @@ fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()>
     {
         mine.pop_front();
     }
-    let used: u32 = mine.iter().map(|x| x.1).sum();
+    let used: u64 = mine.iter().map(|x| x.1).sum();
     if used + n > limit {
         // When enough of the window's spending will have expired.
         let mut freed = 0;
@@ -270,7 +296,6 @@ fn charge(s: &AppState, caller: Caller, budget: Budget, n: u32) -> ApiResult<()>
             wait,
         ));
     }
-    mine.push_back((now, n));
     Ok(())
 }
 

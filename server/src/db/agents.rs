@@ -104,7 +104,7 @@ pub async fn insert_checkpoint_agent(
     submitted_by: Option<i64>,
 ) -> sqlx::Result<i64> {
     sqlx::query_scalar(
-        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, builtin, submitted_by) VALUES ($1, 'checkpoint', $2, $3, $4, $5, $6, $7, $8, $9) RETURNING id",
+        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, builtin, submitted_by, training_json) VALUES ($1, 'checkpoint', $2, $3, $4, $5, $6, $7, $8, $9, $10) RETURNING id",
     )
     .bind(name)
     .bind(spec)
@@ -115,8 +115,54 @@ pub async fn insert_checkpoint_agent(
     .bind(qual.3)
     .bind(builtin as i64)
     .bind(submitted_by)
+    .bind(training_of(spec))
     .fetch_one(pool)
     .await
+}
+
+/// A checkpoint's `training` section as JSON text (`null` when it has none or the text is not a
+/// checkpoint's JSON), read without building the rest of the checkpoint (its weights are skipped).
+pub fn training_of(spec: &str) -> String {
+    #[derive(serde::Deserialize)]
+    struct Part {
+        #[serde(default)]
+        training: Option<Box<serde_json::value::RawValue>>,
+    }
+    serde_json::from_str::<Part>(spec)
+        .ok()
+        .and_then(|p| p.training)
+        .map_or_else(|| "null".to_string(), |t| t.get().to_string())
+}
+
+/// A checkpoint agent's training provenance (its checkpoint's `training` section), if it has one.
+pub async fn agent_training(pool: &Pool, id: i64) -> sqlx::Result<Option<serde_json::Value>> {
+    let found: Option<(Option<String>,)> =
+        sqlx::query_as("SELECT training_json FROM agents WHERE id = $1 AND kind = 'checkpoint'")
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+    Ok(found
+        .and_then(|(t,)| t)
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .filter(|t| !t.is_null()))
+}
+
+/// Fills in the training provenance of the checkpoint agents stored before it had a column of its
+/// own (migration 0007), once: at every open it finds none left. Returns how many it filled.
+pub async fn extract_training(pool: &Pool) -> sqlx::Result<usize> {
+    let missing: Vec<(i64, String)> = sqlx::query_as(
+        "SELECT id, spec FROM agents WHERE kind = 'checkpoint' AND training_json IS NULL",
+    )
+    .fetch_all(pool)
+    .await?;
+    for (id, spec) in &missing {
+        sqlx::query("UPDATE agents SET training_json = $1 WHERE id = $2")
+            .bind(training_of(spec))
+            .bind(id)
+            .execute(pool)
+            .await?;
+    }
+    Ok(missing.len())
 }
 
 /// Rewrites the spec hashes of a store written before they were SHA-256 (32 hex digits then):
@@ -159,6 +205,39 @@ pub async fn rehash_specs(pool: &Pool) -> sqlx::Result<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[tokio::test]
+    async fn training_provenance_is_kept_apart_and_filled_in_for_older_stores() {
+        let pool = test_store("training_json").await;
+        let kmac = ::agents::builtins::checkpoint("kmac").expect("built in");
+        let qual = (6, 0.5, 0.1, 0.1);
+        let id = insert_checkpoint_agent(&pool, "kmac", kmac, qual, true, None)
+            .await
+            .unwrap();
+        let none = insert_checkpoint_agent(&pool, "bare", "{}", qual, false, None)
+            .await
+            .unwrap();
+        let training = agent_training(&pool, id)
+            .await
+            .unwrap()
+            .expect("provenance");
+        let full: serde_json::Value = serde_json::from_str(kmac).unwrap();
+        assert_eq!(training, full["training"]);
+        assert_eq!(agent_training(&pool, none).await.unwrap(), None);
+        // A store from before the column: filled in at open, once.
+        sqlx::query("UPDATE agents SET training_json = NULL")
+            .execute(&pool)
+            .await
+            .unwrap();
+        assert_eq!(agent_training(&pool, id).await.unwrap(), None);
+        assert_eq!(extract_training(&pool).await.unwrap(), 2);
+        assert_eq!(extract_training(&pool).await.unwrap(), 0);
+        assert_eq!(
+            agent_training(&pool, id).await.unwrap(),
+            Some(full["training"].clone())
+        );
+        pool.close().await;
+    }
 
     #[tokio::test]
     async fn restarts_take_no_ids_and_names_are_unique_in_any_case() {

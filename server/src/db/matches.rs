@@ -7,7 +7,7 @@ use super::*;
 /// (a constant of ours, digits and dots only).
 pub(super) fn match_columns() -> String {
     format!(
-        "id, agent_a, agent_b, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by, worker, attempts",
+        "id, agent_a, agent_b, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, replay_bytes, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by, worker, attempts",
         sim::SIM_VERSION
     )
 }
@@ -27,6 +27,7 @@ pub(crate) fn example_match(id: i64, agent_a: i64, agent_b: i64) -> Match {
         spec_hash_a: String::new(),
         spec_hash_b: String::new(),
         keep_replay: true,
+        replay_bytes: 0,
         status: MatchStatus::Queued,
         created_at: String::new(),
         started_at: None,
@@ -137,31 +138,41 @@ pub enum Stored {
     LeaseLost,
 }
 
-/// Stores a played match — rallies, crossings, replay, summary, ratings, SPRT step — and marks it
-/// done, in one transaction, under the worker's current lease (see [`workers`]).
-pub async fn store_result(
-    pool: &Pool,
-    lease: &Lease,
+/// A played match's replay frames as stored: each rally that kept frames, its index and its frames'
+/// JSON gzip-compressed. Blocking (a long match's frames take seconds): call it off the async
+/// threads, before [`store_result`].
+pub fn compress_replay(
     r: &MatchRecord,
     replay: &::agents::matchrun::Replay,
-) -> sqlx::Result<Stored> {
-    let id = lease.match_id;
-    // The replay frames are compressed before the transaction: the write lock (SQLite's only one)
-    // is held for the inserts, not for gzip.
-    let frames: Vec<(i64, Vec<u8>)> = r
-        .rallies
+) -> Vec<(i64, Vec<u8>)> {
+    r.rallies
         .iter()
         .filter_map(|rally| {
             let f = replay.get(rally.index as usize).filter(|f| !f.is_empty())?;
             Some((rally.index as i64, gzip_json(f)))
         })
-        .collect();
+        .collect()
+}
+
+/// Stores a played match — rallies, crossings, replay (as [`compress_replay`] made it), summary,
+/// ratings, SPRT step — and marks it done, in one transaction, under the worker's current lease
+/// (see [`workers`]). A match a submitter token asked for keeps its frames only while that token's
+/// stored replays stay within `replay_quota_bytes`; past it the match keeps none (its rallies are
+/// re-simulated when watched, as continuous-mode ones are).
+pub async fn store_result(
+    pool: &Pool,
+    lease: &Lease,
+    r: &MatchRecord,
+    frames: &[(i64, Vec<u8>)],
+    replay_quota_bytes: u64,
+) -> sqlx::Result<Stored> {
+    let id = lease.match_id;
     // The first statement writes, so the transaction takes the write lock at once (waiting out other
     // writers) instead of upgrading a read lock later.
     let mut tx = pool.begin().await?;
     serialise_writers(pool, &mut tx).await?;
-    let marked: Option<(i64, i64, Option<i64>)> = sqlx::query_as(
-        "UPDATE matches SET status = 'done', finished_at = $12, points_a = $1, points_b = $2, mean_rally_length = $3, max_rally_length = $4, in_box_fraction = $5, energy_distance = $6, drift_slope = $7, drift_json = $8 WHERE id = $9 AND status = 'running' AND worker = $10 AND attempts = $11 RETURNING agent_a, agent_b, sprt_id",
+    let marked: Option<(i64, i64, Option<i64>, Option<i64>)> = sqlx::query_as(
+        "UPDATE matches SET status = 'done', finished_at = $12, points_a = $1, points_b = $2, mean_rally_length = $3, max_rally_length = $4, in_box_fraction = $5, energy_distance = $6, drift_slope = $7, drift_json = $8 WHERE id = $9 AND status = 'running' AND worker = $10 AND attempts = $11 RETURNING agent_a, agent_b, sprt_id, created_by",
     )
     .bind(r.points[0] as i64)
     .bind(r.points[1] as i64)
@@ -179,7 +190,7 @@ pub async fn store_result(
     .persistent(false) // NULL_F64: see below
     .fetch_optional(&mut *tx)
     .await?;
-    let Some((agent_a, agent_b, sprt_id)) = marked else {
+    let Some((agent_a, agent_b, sprt_id, created_by)) = marked else {
         tx.rollback().await?;
         return lost_or_cancelled(pool, id).await;
     };
@@ -194,11 +205,46 @@ pub async fn store_result(
     store_drift(&mut tx, id, [agent_a, agent_b], r).await?;
     store_ratings(&mut tx, id, [agent_a, agent_b], r.points).await?;
     store_rallies(&mut tx, id, r).await?;
-    for (rally, blob) in frames {
-        sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES ($1, $2, $3)")
+    let bytes: i64 = frames.iter().map(|(_, blob)| blob.len() as i64).sum();
+    let keep = match created_by {
+        Some(token) if bytes > 0 => {
+            let used: i64 = sqlx::query_scalar(
+                "SELECT CAST(COALESCE(SUM(replay_bytes), 0) AS BIGINT) FROM matches WHERE created_by = $1",
+            )
+            .bind(token)
+            .fetch_one(&mut *tx)
+            .await?;
+            let keep = (used + bytes) as u64 <= replay_quota_bytes;
+            if !keep {
+                tracing::info!(
+                    id,
+                    token,
+                    used,
+                    bytes,
+                    "the token's replay quota is spent: the match keeps no frames (re-simulated when watched)"
+                );
+            }
+            keep
+        }
+        _ => true,
+    };
+    if keep {
+        for (rally, blob) in frames {
+            sqlx::query("INSERT INTO replays (match_id, rally_idx, frames_gz) VALUES ($1, $2, $3)")
+                .bind(id)
+                .bind(rally)
+                .bind(blob)
+                .execute(&mut *tx)
+                .await?;
+        }
+        sqlx::query("UPDATE matches SET replay_bytes = $1 WHERE id = $2")
+            .bind(bytes)
             .bind(id)
-            .bind(rally)
-            .bind(blob)
+            .execute(&mut *tx)
+            .await?;
+    } else {
+        sqlx::query("UPDATE matches SET keep_replay = 0 WHERE id = $1")
+            .bind(id)
             .execute(&mut *tx)
             .await?;
     }
@@ -365,18 +411,22 @@ pub async fn rallies(pool: &Pool, id: i64) -> sqlx::Result<Vec<Rally>> {
         .map(rows)
 }
 
-/// A rally's replay frames (JSON), if stored.
-pub async fn replay(pool: &Pool, id: i64, rally: i64) -> anyhow::Result<Option<String>> {
+/// A rally's stored replay frames, gzip-compressed JSON ([`gunzip`] them off the async threads).
+pub async fn replay(pool: &Pool, id: i64, rally: i64) -> anyhow::Result<Option<Vec<u8>>> {
     let r: Option<(Vec<u8>,)> =
         sqlx::query_as("SELECT frames_gz FROM replays WHERE match_id = $1 AND rally_idx = $2")
             .bind(id)
             .bind(rally)
             .fetch_optional(pool)
             .await?;
-    let Some((gz,)) = r else { return Ok(None) };
+    Ok(r.map(|(gz,)| gz))
+}
+
+/// Stored replay frames decompressed (blocking).
+pub fn gunzip(gz: &[u8]) -> std::io::Result<String> {
     let mut text = String::new();
-    std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&gz[..]), &mut text)?;
-    Ok(Some(text))
+    std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(gz), &mut text)?;
+    Ok(text)
 }
 
 fn gzip_json<T: Serialize>(value: &T) -> Vec<u8> {

@@ -175,6 +175,7 @@ pub async fn open(location: &Location) -> anyhow::Result<Pool> {
                 .await?;
             sqlx::migrate!("../migrations").run(&pool).await?;
             agents::rehash_specs(&pool).await?;
+            agents::extract_training(&pool).await?;
             Ok(pool)
         }
         Location::Postgres(url) => {
@@ -186,6 +187,7 @@ pub async fn open(location: &Location) -> anyhow::Result<Pool> {
                 .map_err(|e| anyhow::anyhow!("{location}: {e}"))?;
             sqlx::migrate!("../migrations/postgres").run(&pool).await?;
             agents::rehash_specs(&pool).await?;
+            agents::extract_training(&pool).await?;
             Ok(pool)
         }
     }

@@ -57,6 +57,21 @@ pub async fn requeue_held_by(pool: &Pool, worker: &str) -> sqlx::Result<u64> {
     Ok(r.rows_affected())
 }
 
+/// Gives a running match back to the queue under the worker's lease (a process shutting down that
+/// stopped it mid-way: nothing of it was stored); false if the lease was lost meanwhile.
+pub async fn release(pool: &Pool, lease: &Lease) -> sqlx::Result<bool> {
+    let r = sqlx::query(
+        "UPDATE matches SET status = 'queued', started_at = NULL, worker = NULL, lease_expires_ms = NULL \
+         WHERE id = $1 AND status = 'running' AND worker = $2 AND attempts = $3",
+    )
+    .bind(lease.match_id)
+    .bind(&lease.worker)
+    .bind(lease.attempt)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected() == 1)
+}
+
 /// Claims the oldest queued match for `worker` with a lease of `lease_ms` (queued → running) in one
 /// statement (SQLite's single `UPDATE … RETURNING`; on PostgreSQL with `FOR UPDATE SKIP LOCKED`), so
 /// two workers never take the same match; expired leases are queued again first.
@@ -299,9 +314,10 @@ mod tests {
         assert_eq!(current.attempt, 2);
 
         let (record, replay) = one_rally(1);
+        let frames = db::compress_replay(&record, &replay);
         // The old holder's result is refused, its failure too; the current holder's is stored once.
         assert_eq!(
-            db::store_result(&pool, &stale, &record, &replay)
+            db::store_result(&pool, &stale, &record, &frames, u64::MAX)
                 .await
                 .unwrap(),
             Stored::LeaseLost
@@ -311,13 +327,13 @@ mod tests {
             Stored::LeaseLost
         );
         assert_eq!(
-            db::store_result(&pool, &current, &record, &replay)
+            db::store_result(&pool, &current, &record, &frames, u64::MAX)
                 .await
                 .unwrap(),
             Stored::Done
         );
         assert_eq!(
-            db::store_result(&pool, &current, &record, &replay)
+            db::store_result(&pool, &current, &record, &frames, u64::MAX)
                 .await
                 .unwrap(),
             Stored::LeaseLost,
@@ -356,7 +372,8 @@ mod tests {
         for rally in record.rallies.iter_mut() {
             rally.crossings.clear();
         }
-        let stored = db::store_result(&pool, &lease, &record, &replay).await;
+        let frames = db::compress_replay(&record, &replay);
+        let stored = db::store_result(&pool, &lease, &record, &frames, u64::MAX).await;
         assert_eq!(stored.unwrap(), Stored::Done);
         let m = db::match_row(&pool, id).await.unwrap().unwrap();
         assert_eq!(m.in_box_fraction, None, "none, not 0");

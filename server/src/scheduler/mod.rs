@@ -75,7 +75,9 @@ pub struct Workers {
 impl Workers {
     /// Registers this process as worker `state.worker` (refused if a live process holds the name)
     /// and starts its tasks; they stop after `shutdown` is notified, each finishing the match it
-    /// plays. With `settings.workers = 0` nothing is registered or started.
+    /// plays within `shutdown_deadline_s`: past it, the matches still playing stop at the end of
+    /// their rally and are queued again (nothing of them stored). With `settings.workers = 0`
+    /// nothing is registered or started.
     pub async fn start(state: AppState, shutdown: Arc<Notify>) -> anyhow::Result<Workers> {
         let n = state.settings.workers;
         if n == 0 {
@@ -99,10 +101,20 @@ impl Workers {
         {
             let (shutdown, stopping, wake) =
                 (shutdown.clone(), stopping.clone(), state.wake.clone());
+            let state = state.clone();
             tokio::spawn(async move {
                 shutdown.notified().await;
                 stopping.store(true, std::sync::atomic::Ordering::SeqCst);
                 wake.notify_waiters();
+                let deadline = Duration::from_secs_f64(state.settings.shutdown_deadline_s);
+                tokio::time::sleep(deadline).await;
+                let stopped = state.stop_all_playing();
+                if stopped > 0 {
+                    tracing::info!(
+                        stopped,
+                        "shutdown deadline passed: running matches stop at the end of their rally and are queued again"
+                    );
+                }
             });
         }
         let heartbeat = {

@@ -221,11 +221,12 @@ async fn store_retrying(
     state: &AppState,
     lease: &db::Lease,
     record: &agents::matchrun::MatchRecord,
-    replay: &agents::matchrun::Replay,
+    frames: &[(i64, Vec<u8>)],
 ) -> anyhow::Result<db::Stored> {
+    let quota = (state.settings.replay_quota_mb * (1u64 << 20) as f64) as u64;
     let mut attempt = 0;
     loop {
-        match db::store_result(&state.pool, lease, record, replay).await {
+        match db::store_result(&state.pool, lease, record, frames, quota).await {
             Ok(stored) => return Ok(stored),
             Err(e) if attempt < 5 => {
                 attempt += 1;
@@ -285,12 +286,15 @@ pub(super) async fn run_one(
         });
         let a = built.next().ok_or("no side A")??;
         let b = built.next().ok_or("no side B")??;
-        play(&st, &m, &a, &b, claimed)
+        let (record, replay) = play(&st, &m, &a, &b, claimed)?;
+        // Compressed here, off the async threads: a 1 000-rally match's frames take seconds.
+        let frames = db::compress_replay(&record, &replay);
+        Ok::<_, String>((record, frames))
     })
     .await;
     let (stored, status) = match result {
-        Ok(Ok((record, replay))) => {
-            let stored = store_retrying(state, &lease, &record, &replay).await?;
+        Ok(Ok((record, frames))) => {
+            let stored = store_retrying(state, &lease, &record, &frames).await?;
             tracing::info!(
                 id,
                 points_a = record.points[0],
@@ -303,7 +307,16 @@ pub(super) async fn run_one(
         }
         Ok(Err(e)) => {
             let stopped = state.playing.lock().ok().and_then(|p| p.get(&id).cloned());
-            if stopped.is_some_and(|s| s.load(Ordering::SeqCst)) {
+            let stopped = stopped.is_some_and(|s| s.load(Ordering::SeqCst));
+            if stopped && state.shutting_down.load(Ordering::SeqCst) {
+                let queued = db::workers::release(&state.pool, &lease).await?;
+                tracing::info!(id, queued, "stopped by the shutdown deadline: queued again");
+                if queued {
+                    state.publish_match(id, db::MatchStatus::Queued);
+                }
+                return Ok(());
+            }
+            if stopped {
                 tracing::info!(id, "cancelled while playing: {e}");
             } else {
                 tracing::warn!(id, error = %e, "match failed");

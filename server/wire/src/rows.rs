@@ -75,9 +75,13 @@ pub struct Match {
     pub spec_hash_a: String,
     /// Hash of B's spec when queued.
     pub spec_hash_b: String,
-    /// Replay frames are stored.
+    /// Replay frames are stored (else its rallies are re-simulated when watched: continuous-mode,
+    /// tournament and SPRT matches, and those past their submitter's replay quota).
     #[serde(deserialize_with = "flag")]
     pub keep_replay: bool,
+    /// The stored replay frames, bytes (compressed): what the match counts against its submitter's
+    /// replay quota.
+    pub replay_bytes: i64,
     /// Where it is in its life.
     pub status: MatchStatus,
     /// When queued.

@@ -86,13 +86,14 @@ fn overhead(stores: &Stores) -> anyhow::Result<Value> {
         server::db::workers::register(&pool, "bench", "localhost", std::process::id(), 1, 60_000)
             .await?;
         let (mut claims, mut stores) = (Vec::new(), Vec::new());
+        let frames = server::db::compress_replay(&record, &replay);
         for _ in 0..OVERHEAD_MATCHES {
             let t0 = Instant::now();
             let (_, lease) = server::db::workers::claim(&pool, "bench", 60_000)
                 .await?
                 .context("a queued match")?;
             let t1 = Instant::now();
-            let stored = server::db::store_result(&pool, &lease, &record, &replay).await?;
+            let stored = server::db::store_result(&pool, &lease, &record, &frames, u64::MAX).await?;
             anyhow::ensure!(stored == server::db::Stored::Done, "not stored: {stored:?}");
             claims.push((t1 - t0).as_secs_f64() * 1e3);
             stores.push(t1.elapsed().as_secs_f64() * 1e3);
