@@ -205,6 +205,10 @@ fn tournaments_rate_limits_multipart_and_rating_history() {
     assert_eq!(history.len(), done.matches.len(), "{h:?}");
     assert!(history.windows(2).all(|w| w[0].seq < w[1].seq));
     assert!(history.windows(2).all(|w| w[1].deviation <= w[0].deviation));
+    // Paged: the newest points, oldest first, and how many there are.
+    let last: RatingHistory = get_as(a, "/api/v1/agents/1/ratings?limit=2");
+    assert_eq!(last.total, history.len() as i64);
+    assert_eq!(last.history[..], history[history.len() - 2..]);
     // The agent's own drift, pooled over the same matches.
     let agent: AgentDetail = get_as(a, "/api/v1/agents/1");
     assert_eq!(agent.drift.matches, history.len() as i64, "{agent:?}");

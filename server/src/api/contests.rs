@@ -332,16 +332,19 @@ pub(super) async fn cancel_sprt(
 pub(super) async fn get_rating_history(
     State(s): State<AppState>,
     Path(id): Path<String>,
+    Typed(q): Typed<wire::LimitQuery>,
 ) -> ApiResult<Json<wire::RatingHistory>> {
     let id = parse_id(&id, "id")?;
+    let limit = limit_of(q.limit, 1000, 10_000)?;
     let a = db::agent(&s.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("agent", id))?;
-    let history = db::rating_history(&s.pool, id).await?;
+    let (total, history) = db::rating_history(&s.pool, id, limit).await?;
     Ok(Json(wire::RatingHistory {
         agent_id: id,
         agent: a.name,
         system: "glicko2".into(),
+        total,
         history,
     }))
 }

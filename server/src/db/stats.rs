@@ -102,13 +102,25 @@ pub async fn agent_crossings(
     Ok((total, rows(found)))
 }
 
-/// An agent's rating history, oldest first.
-pub async fn rating_history(pool: &Pool, agent: i64) -> sqlx::Result<Vec<RatingPoint>> {
-    sqlx::query_as::<_, Row<RatingPoint>>("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = $1 ORDER BY seq")
+/// An agent's rating history: how many points it has, and the newest `limit` of them, oldest first.
+pub async fn rating_history(
+    pool: &Pool,
+    agent: i64,
+    limit: i64,
+) -> sqlx::Result<(i64, Vec<RatingPoint>)> {
+    let (total,): (i64,) =
+        sqlx::query_as("SELECT COUNT(*) FROM rating_history WHERE agent_id = $1")
+            .bind(agent)
+            .fetch_one(pool)
+            .await?;
+    let mut newest = sqlx::query_as::<_, Row<RatingPoint>>("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = $1 ORDER BY seq DESC LIMIT $2")
         .bind(agent)
+        .bind(limit)
         .fetch_all(pool)
         .await
-        .map(rows)
+        .map(rows)?;
+    newest.reverse();
+    Ok((total, newest))
 }
 
 /// The drift statistics of one side of a match: (side, agent, JSON).

@@ -229,7 +229,8 @@ pub struct RallyCount {
     pub rallies: i64,
 }
 
-/// `GET /agents/{id}/ratings`: its Glicko-2 history, one point per finished match.
+/// `GET /agents/{id}/ratings?limit=`: its Glicko-2 history, one point per finished match: the
+/// newest `limit` points (default 1 000, at most 10 000).
 #[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 pub struct RatingHistory {
     /// The agent.
@@ -238,6 +239,8 @@ pub struct RatingHistory {
     pub agent: String,
     /// `glicko2`.
     pub system: String,
+    /// Points in all (the answer has the newest of them).
+    pub total: i64,
     /// Oldest first.
     pub history: Vec<RatingPoint>,
 }
