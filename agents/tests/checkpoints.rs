@@ -21,6 +21,7 @@ fn model() -> Arc<Model> {
 fn kmac() -> ControllerSpec {
     ControllerSpec::Kmac {
         gains: PdGains { kp: 40.0, kd: 3.0 },
+        activation_clamp: None,
     }
 }
 
@@ -91,6 +92,7 @@ fn bad_checkpoints_are_refused_naming_the_field() {
     let mut c = good.clone();
     c.controller = ControllerSpec::Kmac {
         gains: PdGains { kp: -1.0, kd: 0.0 },
+        activation_clamp: None,
     };
     refused(&m, &c, "controller.gains");
     // NaN cannot be written in JSON; a checkpoint built in memory is validated all the same.

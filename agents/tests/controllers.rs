@@ -242,3 +242,63 @@ fn every_observation_and_action_entry_has_a_name() {
         assert_eq!(unique.len(), names.len(), "{method:?}: action names repeat");
     }
 }
+
+#[test]
+fn kmac_in_the_official_form_sends_its_activation_targets_clamped_and_noise_is_seeded() {
+    let m = model();
+    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
+    robot.reset(Some(&ready(&m)));
+    let clamp = agents::controller::official_activation_clamp();
+    assert!(
+        (clamp[0] - 0.000_552_778_636_9).abs() < 1e-12
+            && (clamp[1] - 0.924_141_819_98).abs() < 1e-10
+    );
+    let gains = PdGains { kp: 10.0, kd: 1.0 };
+    let space = ActionSpace::new(&m);
+    let mut rng = Rng::seeded(9);
+    let targets: Vec<f64> = space
+        .joints
+        .iter()
+        .map(|&j| {
+            let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
+            rng.uniform(r[0], r[1])
+        })
+        .collect();
+    let controls = |kmac: &mut Kmac| {
+        let mut ctrl = vec![0.0; m.actuators.len()];
+        kmac.controls(&m, &robot.state, &targets, 0.01, &mut ctrl);
+        ctrl
+    };
+    let ours = controls(&mut Kmac::new(&m, gains));
+    let official = controls(&mut Kmac::new(&m, gains).with_activation_clamp(Some(clamp)));
+    // Each muscle's control is its activation target, within the clamp (ours inverts the
+    // activation dynamics instead, so the two differ wherever the activation must move).
+    let mut differ = 0;
+    for &a in &space.muscles {
+        assert!(
+            (clamp[0]..=clamp[1]).contains(&official[a]),
+            "{}",
+            official[a]
+        );
+        differ += ((official[a] - ours[a]).abs() > 1e-6) as usize;
+    }
+    assert!(
+        differ > space.muscles.len() / 2,
+        "{differ} of {} differ",
+        space.muscles.len()
+    );
+    // Noise: the same seed, the same controls; another seed, others; all within the clamp.
+    let noisy = |seed: u64| {
+        let mut k = Kmac::new(&m, gains).with_activation_clamp(Some(clamp));
+        k.set_activation_noise(0.1, seed);
+        controls(&mut k)
+    };
+    let (a, b, c) = (noisy(1), noisy(1), noisy(2));
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    assert_ne!(a, official);
+    assert!(space
+        .muscles
+        .iter()
+        .all(|&i| (clamp[0]..=clamp[1]).contains(&a[i])));
+}

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use agents::checkpoint::{Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
+use agents::checkpoint::{Activation, Checkpoint, ObservationSpec, OnnxPolicy, FORMAT, VERSION};
 use agents::controller::{ControllerSpec, PdGains};
 use agents::observation::ObsBlock;
 
@@ -19,6 +19,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
         name: "onnx-fixture".into(),
         controller: ControllerSpec::Kmac {
             gains: PdGains { kp: 40.0, kd: 3.0 },
+            activation_clamp: None,
         },
         observation: ObservationSpec {
             blocks,
@@ -176,16 +177,37 @@ fn an_onnx_model_without_an_input_is_refused_not_a_panic() {
 }
 
 #[test]
-fn an_onnx_policy_whose_width_changes_with_its_input_forfeits_instead_of_panicking() {
+fn an_onnx_policy_whose_shapes_depend_on_its_input_is_refused() {
     // `tools/make_onnx_policy.py`: 13 zeros for the zero observation, two more entries per negative
-    // observation entry. Validation sees the right width; play must not index past it.
+    // observation entry (NonZero). Its width, and what it allocates, would change in play: refused
+    // when it is read, whatever it answers the zero observation.
     let m = model();
     let bytes = include_bytes!("fixtures/policy_variable_width.onnx");
     let ck = onnx_checkpoint(ObsBlock::ALL.to_vec(), 206, bytes);
+    let e = ck.validate(&m).unwrap_err();
+    assert!(
+        e.message.contains("known only from the input's values"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_network_whose_output_is_not_finite_in_play_forfeits_instead_of_panicking() {
+    // Finite for the zero observation validation tries, infinite for the observations of play: the
+    // player's check at every call turns it into an invalid action (the episode's end), never a
+    // panic.
+    let m = model();
+    let kmac = ControllerSpec::Kmac {
+        gains: PdGains { kp: 10.0, kd: 1.0 },
+        activation_clamp: None,
+    };
+    let mut ck = Checkpoint::template(&m, "overflow", kmac, &[8], Activation::Relu);
+    for layer in &mut ck.policy.as_mut().unwrap().layers {
+        for row in &mut layer.weights {
+            row.iter_mut().for_each(|w| *w = 1e300);
+        }
+    }
     ck.validate(&m).unwrap_or_else(|e| panic!("{e}"));
-    let net = ck.network().unwrap();
-    assert_eq!(net.forward(&[0.0; 206]).unwrap().len(), 13);
-    assert_eq!(net.forward(&[-1.0; 206]).unwrap().len(), 13 + 2 * 206);
     let e = agents::eval::Evaluation {
         model: m.clone(),
         config: sim::config::ArenaConfig::default(),

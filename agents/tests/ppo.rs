@@ -76,6 +76,26 @@ fn the_rally_finetune_configuration_is_the_rally_one_but_for_the_ball_out_term()
 }
 
 #[test]
+fn the_myochallenge_configuration_is_the_default_but_for_the_official_kmac_and_noise() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/train-myochallenge.toml"
+    );
+    let mut c: TrainConfig =
+        toml::from_str(&std::fs::read_to_string(path).expect("read")).expect("parses");
+    c.validate().unwrap();
+    let clamp = c.controller.kmac_activation_clamp.take().expect("a clamp");
+    assert_eq!(clamp, agents::controller::official_activation_clamp());
+    assert_eq!(
+        (c.controller.action_noise, c.controller.activation_noise),
+        (0.05, 0.1)
+    );
+    c.controller.action_noise = 0.0;
+    c.controller.activation_noise = 0.0;
+    assert_eq!(c, TrainConfig::default());
+}
+
+#[test]
 fn a_sigma_cap_holds_the_policy_noise_under_its_schedule() {
     // The cap's schedule: linear from the first value to the second over max_std_steps, then flat.
     let mut c = small(8, 4, 100);

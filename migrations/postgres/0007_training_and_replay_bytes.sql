@@ -7,3 +7,5 @@ ALTER TABLE agents ADD COLUMN training_json TEXT;
 -- its submitter's replay quota.
 ALTER TABLE matches ADD COLUMN replay_bytes BIGINT NOT NULL DEFAULT 0;
 UPDATE matches SET replay_bytes = COALESCE((SELECT SUM(LENGTH(frames_gz)) FROM replays WHERE replays.match_id = matches.id), 0);
+-- A token's stored replays are summed at every match it asked for.
+CREATE INDEX matches_created_by ON matches (created_by);

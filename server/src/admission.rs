@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 use std::process::Stdio;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use agents::admit::Admission;
@@ -13,6 +14,10 @@ use tokio::io::AsyncWriteExt;
 use crate::settings::{Settings, EMBEDDED_BUILTINS};
 use crate::state::AppState;
 use crate::{api, db};
+
+/// Exit status of `rally checkpoint admit` when it could not set itself up (its limits, its
+/// input): the server's failure (a 500), not the checkpoint's.
+pub const ADMIT_SETUP_FAILED: i32 = 3;
 
 /// Why a submitted checkpoint was not admitted.
 #[derive(Debug)]
@@ -24,10 +29,14 @@ pub enum Refused {
     /// It used the CPU time `admission_cpu_s` allows (s), or its process ran past its wall-clock
     /// bound ([`wall_bound`]).
     OverCpu(f64),
+    /// Its process was killed (SIGKILL: its hard CPU limit, or the kernel's out-of-memory killer).
+    Killed,
     /// It asked for more memory than `admission_memory_mb` allows (MiB; what failed).
     OverMemory(u64, String),
     /// Its admission process died otherwise (how).
     Crashed(String),
+    /// `admission_queue` submissions already wait for their turn.
+    Busy,
 }
 
 /// The wall-clock bound on an admission process: four times its CPU budget and 10 s (its CPU
@@ -46,13 +55,23 @@ pub async fn admit_submission(
     text: String,
 ) -> anyhow::Result<Result<EvalReport, Refused>> {
     let s = &state.settings;
+    let waiting = state.admit_waiting.fetch_add(1, Ordering::SeqCst);
+    let _leave = Leave(&state.admit_waiting);
+    if waiting >= s.admission_queue {
+        return Ok(Err(Refused::Busy));
+    }
     let _turn = state
         .admit
         .acquire()
         .await
         .map_err(|e| anyhow::anyhow!("admission queue closed: {e}"))?;
-    let exe = std::env::current_exe()
-        .map_err(|e| anyhow::anyhow!("the server's executable, to run the admission in: {e}"))?;
+    // This very executable, even if its file was replaced or removed since it started.
+    let exe = match std::path::Path::new("/proc/self/exe").exists() {
+        true => std::path::PathBuf::from("/proc/self/exe"),
+        false => std::env::current_exe().map_err(|e| {
+            anyhow::anyhow!("the server's executable, to run the admission in: {e}")
+        })?,
+    };
     let mut child = tokio::process::Command::new(exe)
         .args(["checkpoint", "admit", "--episodes"])
         .arg(s.qualification_episodes.to_string())
@@ -60,6 +79,8 @@ pub async fn admit_submission(
         .arg(s.admission_cpu_s.to_string())
         .arg("--memory-mb")
         .arg(s.admission_memory_mb.to_string())
+        // Nothing of the server's environment (its admin token, its database's password).
+        .env_clear()
         .env("RUST_LOG", "warn")
         .env("RUST_BACKTRACE", "0")
         .stdin(Stdio::piped())
@@ -79,11 +100,26 @@ pub async fn admit_submission(
         return Ok(Err(Refused::OverCpu(s.admission_cpu_s)));
     };
     let out = out.map_err(|e| anyhow::anyhow!("waiting for the admission process: {e}"))?;
+    if out.status.code() == Some(ADMIT_SETUP_FAILED) {
+        anyhow::bail!(
+            "the admission process could not set itself up: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
     Ok(judge(s, &out))
 }
 
-const SIGKILL: i32 = 9;
-const SIGXCPU: i32 = 24;
+/// Counts itself out of the admission queue when dropped.
+struct Leave<'a>(&'a AtomicUsize);
+
+impl Drop for Leave<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+const SIGKILL: i32 = libc::SIGKILL;
+const SIGXCPU: i32 = libc::SIGXCPU;
 
 /// What an admission process's exit and output say.
 fn judge(s: &Settings, out: &std::process::Output) -> Result<EvalReport, Refused> {
@@ -107,8 +143,9 @@ fn judge(s: &Settings, out: &std::process::Output) -> Result<EvalReport, Refused
         };
     }
     match out.status.signal() {
-        // SIGXCPU at the soft CPU limit, SIGKILL at the hard one a second later.
-        Some(sig) if sig == SIGXCPU || sig == SIGKILL => Err(Refused::OverCpu(s.admission_cpu_s)),
+        // SIGXCPU at the soft CPU limit.
+        Some(SIGXCPU) => Err(Refused::OverCpu(s.admission_cpu_s)),
+        Some(SIGKILL) => Err(Refused::Killed),
         signal => {
             let last = stderr.lines().rev().find(|l| !l.trim().is_empty());
             Err(Refused::Crashed(format!(

@@ -47,6 +47,9 @@ pub struct Settings {
     /// Memory a submitted checkpoint's admission process may allocate, MiB: past it its
     /// allocations fail and the submission is refused (422 naming this setting).
     pub admission_memory_mb: u64,
+    /// Submissions that may wait for their admission at once (one is admitted at a time); past
+    /// it, 503 with `Retry-After`.
+    pub admission_queue: usize,
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
     /// Admin token (the `RALLY_ADMIN_TOKEN` environment variable overrides it); empty disables
@@ -190,8 +193,11 @@ impl Settings {
         if s.max_rallies_per_hour == 0 {
             return Err("max_rallies_per_hour must be positive".into());
         }
-        if !(16..=1 << 30).contains(&s.admission_memory_mb) {
-            return Err("admission_memory_mb must be between 16 and 2^30 MiB".into());
+        if !(64..=1 << 30).contains(&s.admission_memory_mb) {
+            return Err("admission_memory_mb must be between 64 and 2^30 MiB".into());
+        }
+        if s.admission_queue == 0 {
+            return Err("admission_queue must be positive".into());
         }
         if s.max_matches_per_minute == 0 {
             return Err("max_matches_per_minute must be positive".into());

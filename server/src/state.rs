@@ -34,13 +34,16 @@ pub struct AppState {
     /// One admission (a checkpoint validated and qualified) at a time: submissions wait their
     /// turn instead of piling up on the CPU ([`crate::admission::admit_submission`]).
     pub admit: Arc<tokio::sync::Semaphore>,
+    /// Submissions admitted or waiting for their turn (at most `admission_queue`).
+    pub admit_waiting: Arc<std::sync::atomic::AtomicUsize>,
     /// What changed, for the event stream's subscribers.
     pub events: tokio::sync::broadcast::Sender<ServerEvent>,
     /// Running matches that can be watched live: the frames of the rally being played (with body
     /// poses, as JSON) and each rally's record go to the match's channel, which its worker drops
     /// when the match ends.
     pub live: Arc<std::sync::Mutex<std::collections::HashMap<i64, LiveChannel>>>,
-    /// Replays of matches that kept no frames are re-simulated, as many at a time as there are workers.
+    /// Replays are read (stored frames decompressed, or a rally re-simulated for a match that kept
+    /// none) as many at a time as there are workers.
     pub resim: Arc<tokio::sync::Semaphore>,
     /// The agents' built players, shared by the workers and the re-simulations.
     pub players: Arc<crate::players::PlayerCache>,
@@ -140,6 +143,7 @@ pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
         board: Arc::new(tokio::sync::Mutex::new(None)),
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
         admit: Arc::new(tokio::sync::Semaphore::new(1)),
+        admit_waiting: Arc::new(std::sync::atomic::AtomicUsize::new(0)),
         events: tokio::sync::broadcast::channel(EVENT_BUFFER).0,
         live: Arc::new(std::sync::Mutex::new(std::collections::HashMap::new())),
         resim: Arc::new(tokio::sync::Semaphore::new(workers)),

@@ -54,6 +54,20 @@ pub struct RallyParams {
     pub max_seconds: f64,
 }
 
+/// What MyoChallenge's P2 draws per episode besides the ball (MyoSuite's `paddle_mass_range` and
+/// `ball_friction_range`), uniformly, from the episode's seed after the serve: `[p2]` in an arena's
+/// configuration (the MyoChallenge robot's has it; the default robot's P2 draws the ball only).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct P2Draws {
+    /// The paddle's mass, kg (its inertia scaled with it).
+    pub paddle_mass: [f64; 2],
+    /// The ball's sliding friction (the scene's is 1.0; MyoSuite draws the torsional and rolling
+    /// coefficients too). Kept with the episode; see `SingleServe::ball_friction` for why it
+    /// changes no contact law of ours.
+    pub ball_friction: [f64; 2],
+}
+
 /// Everything in `config/arena.toml`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -64,6 +78,9 @@ pub struct ArenaConfig {
     pub grip: GripParams,
     /// Rally limits.
     pub rally: RallyParams,
+    /// What P2 draws per episode besides the ball, if anything.
+    #[serde(default)]
+    pub p2: Option<P2Draws>,
 }
 
 impl ArenaConfig {
@@ -103,6 +120,18 @@ impl ArenaConfig {
         }
         if g.muscles.is_empty() {
             return Err("grip.muscles must name at least one muscle".into());
+        }
+        if let Some(p2) = &c.p2 {
+            for (name, [lo, hi]) in [
+                ("p2.paddle_mass", p2.paddle_mass),
+                ("p2.ball_friction", p2.ball_friction),
+            ] {
+                if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi) {
+                    return Err(format!(
+                        "{name} must be [low, high] with 0 < low <= high, got [{lo}, {hi}]"
+                    ));
+                }
+            }
         }
         Ok(c)
     }

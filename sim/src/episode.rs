@@ -94,6 +94,16 @@ pub struct SingleServe {
     pub success: bool,
     /// Whether the episode is over.
     pub done: bool,
+    /// The ball's sliding friction this episode (P2's draw, else the scene's 1). Drawn and kept as
+    /// MyoChallenge does, it changes none of our contact laws: in MuJoCo's scene, over P2's range,
+    /// it moves a table bounce's rebound by 0.1–0.3% and its horizontal speed by 3e-5
+    /// (`tools/mujoco_ball_friction.py`; docs/simulator.md), below what our laws, fitted to that
+    /// scene, resolve.
+    pub ball_friction: f64,
+    /// The contact laws before any per-episode draw.
+    preset: Preset,
+    /// What P2 draws besides the ball (the arena configuration's `[p2]`).
+    p2: Option<crate::config::P2Draws>,
 }
 
 impl SingleServe {
@@ -119,21 +129,42 @@ impl SingleServe {
             hit: false,
             success: false,
             done: false,
+            ball_friction: 1.0,
+            preset,
+            p2: config.p2.clone(),
         })
     }
 
-    /// A new episode: the robot at `qpos` (default: "ready"), a serve of `kind` drawn from `rng`.
+    /// A new episode: the robot at `qpos` (default: "ready"), a serve of `kind` drawn from `rng`;
+    /// a P2 serve of an arena whose configuration has `[p2]` also draws, after the ball, the
+    /// paddle's mass and the ball's friction (MyoChallenge's P2).
     pub fn reset(&mut self, kind: ServeKind, rng: &mut Rng, qpos: Option<&[f64]>) {
-        let model = BounceModel::for_table(&self.world.preset.table);
-        self.reset_with(serve::generate(kind, rng, &model), qpos);
+        let model = BounceModel::for_table(&self.preset.table);
+        let serve = serve::generate(kind, rng, &model);
+        let (mass, friction) = match (&self.p2, kind) {
+            (Some(p2), ServeKind::P2) => {
+                let [m0, m1] = p2.paddle_mass;
+                let [f0, f1] = p2.ball_friction;
+                (Some(rng.uniform(m0, m1)), rng.uniform(f0, f1))
+            }
+            _ => (None, 1.0),
+        };
+        self.start(serve, qpos, mass, friction);
     }
 
-    /// A new episode with a given ball: the robot at `qpos` (default: "ready"), `serve` in play.
+    /// A new episode with a given ball: the robot at `qpos` (default: "ready"), `serve` in play,
+    /// the model's own paddle and the scene's friction.
     pub fn reset_with(&mut self, serve: Serve, qpos: Option<&[f64]>) {
+        self.start(serve, qpos, None, 1.0);
+    }
+
+    fn start(&mut self, serve: Serve, qpos: Option<&[f64]>, mass: Option<f64>, friction: f64) {
+        self.robot.set_paddle_mass(mass);
+        self.ball_friction = friction;
         let ready = ready_pose(self.robot.held_model());
         self.robot.reset(qpos.or(ready.as_deref()));
         self.serve = serve;
-        self.world = BallWorld::new(self.world.preset, self.serve.ball);
+        self.world = BallWorld::new(self.preset, self.serve.ball);
         self.referee = Referee::new(self.serve.server);
         self.steps = 0;
         self.hit = false;

@@ -112,6 +112,11 @@ impl SideFrame {
 #[derive(Debug, Clone)]
 struct PaddleBody {
     hand: usize,
+    /// The paddle's body in the model.
+    index: usize,
+    /// The model's own mass and inertia (what [`Robot::set_paddle_mass`] scales).
+    nominal_mass: f64,
+    nominal_inertia: Matrix3<f64>,
     nominal: Pose,
     mass: f64,
     com: V3,
@@ -179,6 +184,9 @@ impl Robot {
             .collect::<Result<Vec<_>, _>>()?;
         let body = PaddleBody {
             hand,
+            index: pb,
+            nominal_mass: paddle.mass,
+            nominal_inertia: paddle.inertia,
             nominal: Pose {
                 pos: paddle.pos,
                 rot: paddle.quat,
@@ -219,6 +227,28 @@ impl Robot {
         };
         robot.reset(None);
         Ok(robot)
+    }
+
+    /// Gives the paddle `mass` kg, its inertia scaled with it and its centre of mass kept (the
+    /// model's own paddle: `None`); MyoChallenge's P2 draws it per episode. Call it between
+    /// episodes: it takes effect at the next physics step.
+    pub fn set_paddle_mass(&mut self, mass: Option<f64>) {
+        let mass = mass.unwrap_or(self.body.nominal_mass);
+        if mass == self.body.mass {
+            return;
+        }
+        let inertia = self.body.nominal_inertia * (mass / self.body.nominal_mass.max(1e-12));
+        let mut model = (*self.held_model).clone();
+        model.bodies[self.body.index].mass = mass;
+        model.bodies[self.body.index].inertia = inertia;
+        self.held_model = Arc::new(model);
+        self.body.mass = mass;
+        self.body.inertia = inertia;
+    }
+
+    /// The paddle's mass, kg.
+    pub fn paddle_mass(&self) -> f64 {
+        self.body.mass
     }
 
     /// The model the robot moves with (the paddle's mass belongs to the hand only while held).

@@ -98,3 +98,64 @@ fn caps_drops_and_invalid_actions() {
         (EndReason::Failure(Failure::InvalidAction), Some(Side::A))
     );
 }
+
+#[test]
+fn p2_of_an_arena_with_p2_draws_draws_the_paddle_mass_and_ball_friction_after_the_ball() {
+    let plain = ArenaConfig::default();
+    assert_eq!(plain.p2, None, "the default robot's P2 draws the ball only");
+    let drawn = ArenaConfig {
+        p2: Some(sim::config::P2Draws {
+            paddle_mass: [0.10, 0.15],
+            ball_friction: [0.9, 1.1],
+        }),
+        ..plain.clone()
+    };
+    let mut a = SingleServe::new(model(), &plain, MYOCHALLENGE).unwrap();
+    let mut b = SingleServe::new(model(), &drawn, MYOCHALLENGE).unwrap();
+    let nominal = a.robot.paddle_mass();
+    let mut masses = Vec::new();
+    for seed in 0..20 {
+        a.reset(ServeKind::P2, &mut Rng::seeded(seed), None);
+        b.reset(ServeKind::P2, &mut Rng::seeded(seed), None);
+        // The same ball (drawn first), then the draws.
+        assert_eq!(a.serve.ball.pos, b.serve.ball.pos);
+        assert_eq!((a.robot.paddle_mass(), a.ball_friction), (nominal, 1.0));
+        let (m, f) = (b.robot.paddle_mass(), b.ball_friction);
+        assert!(
+            (0.10..=0.15).contains(&m) && (0.9..=1.1).contains(&f),
+            "{m} {f}"
+        );
+        assert_eq!(
+            b.robot
+                .held_model()
+                .bodies
+                .iter()
+                .filter(|x| x.mass == m)
+                .count(),
+            1
+        );
+        assert_eq!(b.world.preset, MYOCHALLENGE);
+        masses.push(m);
+        // The same seed, the same draws.
+        let mut again = SingleServe::new(model(), &drawn, MYOCHALLENGE).unwrap();
+        again.reset(ServeKind::P2, &mut Rng::seeded(seed), None);
+        assert_eq!((again.robot.paddle_mass(), again.ball_friction), (m, f));
+    }
+    assert!(masses.iter().any(|&m| m < 0.125) && masses.iter().any(|&m| m > 0.125));
+    // Other serves play the model's own paddle in the scene's friction.
+    b.reset(ServeKind::P1, &mut Rng::seeded(3), None);
+    assert_eq!((b.robot.paddle_mass(), b.ball_friction), (nominal, 1.0));
+    // A heavier paddle weighs on the arm: the same relaxed episode moves it otherwise.
+    let fall = |mass_seed: u64| {
+        let mut e = SingleServe::new(model(), &drawn, MYOCHALLENGE).unwrap();
+        e.reset(ServeKind::P2, &mut Rng::seeded(mass_seed), None);
+        for _ in 0..20 {
+            e.step();
+        }
+        (e.robot.paddle_mass(), e.robot.state.qpos.clone())
+    };
+    let (m1, q1) = fall(0);
+    let (m2, q2) = fall(1);
+    assert_ne!(m1, m2);
+    assert_ne!(q1, q2);
+}

@@ -147,6 +147,7 @@ fn template(
     let spec = match controller {
         "kmac" => ControllerSpec::Kmac {
             gains: PdGains { kp: 40.0, kd: 3.0 },
+            activation_clamp: None,
         },
         "muscle_pd" => ControllerSpec::MusclePd {
             gains: PdGains::MUSCLE_PD,
@@ -201,6 +202,10 @@ fn validate(model: &Model, file: &Path) -> Result<(), CliError> {
     Ok(())
 }
 
+/// The longest message an admission outcome carries, bytes: a hostile checkpoint's field names and
+/// tract's words about its nodes come back to the server and into the 422.
+const MAX_MESSAGE: usize = 2048;
+
 /// `rally checkpoint admit`: limits itself, reads the checkpoint from standard input, prints the
 /// admission's outcome.
 fn admit(
@@ -210,23 +215,22 @@ fn admit(
     cpu_s: f64,
     memory_mb: u64,
 ) -> Result<(), CliError> {
-    use rlimit::Resource;
     if !(cpu_s.is_finite() && cpu_s > 0.0) || memory_mb == 0 {
         return Err(CliError::Usage(
             "--cpu-s and --memory-mb must be positive".into(),
         ));
     }
-    // The soft CPU limit sends SIGXCPU (which ends the process), the hard one a second later SIGKILL.
-    let cpu = cpu_s.ceil() as u64;
-    Resource::CPU
-        .set(cpu, cpu + 1)
-        .map_err(|e| CliError::Failed(anyhow::anyhow!("setting the CPU-time limit: {e}")))?;
-    let bytes = memory_mb.saturating_mul(1 << 20);
-    Resource::DATA
-        .set(bytes, bytes)
-        .map_err(|e| CliError::Failed(anyhow::anyhow!("setting the memory limit: {e}")))?;
+    if let Err(e) = limit_self(cpu_s, memory_mb) {
+        eprintln!("rally checkpoint admit: {e}");
+        std::process::exit(server::ADMIT_SETUP_FAILED);
+    }
+    // Panics are caught and become outcomes; their default report would only echo hostile text.
+    std::panic::set_hook(Box::new(|_| {}));
     let mut text = String::new();
-    std::io::Read::read_to_string(&mut std::io::stdin().lock(), &mut text)?;
+    if let Err(e) = std::io::Read::read_to_string(&mut std::io::stdin().lock(), &mut text) {
+        eprintln!("rally checkpoint admit: reading the checkpoint: {e}");
+        std::process::exit(server::ADMIT_SETUP_FAILED);
+    }
     let eval = agents::eval::Evaluation {
         model,
         config: sim::config::ArenaConfig::default(),
@@ -235,10 +239,57 @@ fn admit(
         episodes,
         seed,
     };
-    let outcome = agents::admit::admit(&text, &eval);
+    let outcome = shortened(agents::admit::admit(&text, &eval));
     let line = serde_json::to_string(&outcome).map_err(|e| CliError::Failed(e.into()))?;
     println!("{line}");
     Ok(())
+}
+
+/// CPU time (the soft limit sends SIGXCPU, which ends the process; the hard one a second later
+/// SIGKILL), memory (its data segment and private mappings: allocations past it fail), no core
+/// dumps, and first in line for the kernel's out-of-memory killer. A limit above what this process
+/// may have is lowered to that.
+fn limit_self(cpu_s: f64, memory_mb: u64) -> Result<(), String> {
+    use rlimit::Resource;
+    let cpu = cpu_s.ceil() as u64;
+    let bytes = memory_mb.saturating_mul(1 << 20);
+    for (resource, name, soft, hard) in [
+        (Resource::CPU, "CPU time", cpu, cpu + 1),
+        (Resource::DATA, "memory", bytes, bytes),
+        (Resource::CORE, "core dumps", 0, 0),
+    ] {
+        let (_, max) = resource
+            .get()
+            .map_err(|e| format!("reading the {name} limit: {e}"))?;
+        resource
+            .set(soft.min(max), hard.min(max))
+            .map_err(|e| format!("setting the {name} limit: {e}"))?;
+    }
+    // Best effort: a kernel without it, or a sandbox that hides /proc, still has the limits above.
+    let _ = std::fs::write("/proc/self/oom_score_adj", "1000");
+    Ok(())
+}
+
+/// The outcome with its message cut to [`MAX_MESSAGE`] bytes.
+fn shortened(outcome: agents::admit::Admission) -> agents::admit::Admission {
+    use agents::admit::Admission;
+    let cut = |mut s: String| {
+        if s.len() > MAX_MESSAGE {
+            let mut end = MAX_MESSAGE;
+            while !s.is_char_boundary(end) {
+                end -= 1;
+            }
+            s.truncate(end);
+            s.push_str(" …");
+        }
+        s
+    };
+    match outcome {
+        Admission::Invalid { error } => Admission::Invalid { error: cut(error) },
+        Admission::Failed { error } => Admission::Failed { error: cut(error) },
+        Admission::OverMemory { error } => Admission::OverMemory { error: cut(error) },
+        qualified @ Admission::Qualified { .. } => qualified,
+    }
 }
 
 /// `rally checkpoint scale-noise FILE`: writes it to `out` with `factor` times its action noise.

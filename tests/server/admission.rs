@@ -68,6 +68,7 @@ fn uploads_past_the_admission_budgets_are_refused_and_the_server_keeps_answering
         &dir,
         false,
         "builtin_checkpoints = \"\"\nadmission_cpu_s = 2.0\nadmission_memory_mb = 512\nqualification_min_hit_rate = 0.3\n\
+         admission_queue = 1\n\
          max_body_bytes = 8388608\n",
     );
     let a = srv.addr.as_str();
@@ -88,13 +89,13 @@ fn uploads_past_the_admission_budgets_are_refused_and_the_server_keeps_answering
             "over_budget",
             "admission_memory_mb",
         ),
-        // 13 actions for the zero observation, more for others: its actions are refused in play
-        // (each episode ends at once), never indexed past: it qualifies for nothing.
+        // 13 actions for the zero observation, more for others: refused when read (its shapes
+        // depend on its input).
         (
             "variable-width",
             include_bytes!("../../agents/tests/fixtures/policy_variable_width.onnx"),
-            "below_qualification",
-            "hit 0 of 6",
+            "invalid_checkpoint",
+            "known only from the input's values",
         ),
     ];
     for (name, onnx, code_word, says) in fixtures {
@@ -119,6 +120,21 @@ fn uploads_past_the_admission_budgets_are_refused_and_the_server_keeps_answering
             "{name}: /healthz took {worst:?}"
         );
     }
+    // One admission waits at most (admission_queue = 1): a second upload meanwhile is told to come
+    // back later, and charged nothing.
+    let slow = json!({"name": "slow2", "checkpoint": onnx_checkpoint("slow2", fixtures[0].1)});
+    let first = {
+        let (a, slow) = (a.to_string(), slow.clone());
+        std::thread::spawn(move || call(&a, "POST", "/api/v1/agents", Some(&slow), Some(TOKEN)))
+    };
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, v) = call(a, "POST", "/api/v1/agents", Some(&slow), Some(TOKEN));
+    assert_eq!(
+        (code, v["error"]["code"].as_str()),
+        (503, Some("busy")),
+        "{v}"
+    );
+    assert_eq!(first.join().unwrap().0, 422);
     // The memory went to the admission's process, not the server's.
     let grew_mib = rss_kib(&srv).saturating_sub(rss_before) / 1024;
     assert!(grew_mib < 256, "the server grew by {grew_mib} MiB");

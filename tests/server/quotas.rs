@@ -18,7 +18,12 @@ fn token(a: &str, name: &str) -> String {
 fn a_token_asks_for_rallies_within_its_hourly_budget_an_sprt_counting_all_it_may_play() {
     let dir = tempdir("rally_budget");
     // No workers: what is queued stays queued; the budget is spent when asked for.
-    let srv = start_serve(&dir, 0, false, "max_rallies_per_hour = 100\n");
+    let srv = start_serve(
+        &dir,
+        0,
+        false,
+        "max_rallies_per_hour = 100\nmax_matches_per_minute = 4\n",
+    );
     let a = srv.addr.as_str();
     let mine = token(a, "lab");
     let queue = |rallies: u32, who: &str| {
@@ -55,12 +60,20 @@ fn a_token_asks_for_rallies_within_its_hourly_budget_an_sprt_counting_all_it_may
         message.contains("asked for 60 rallies in the last hour (limit 100)"),
         "{message}"
     );
-    // Refused whole: the SPRT queued nothing, its first match included.
+    // Refused whole: the SPRT queued nothing, its first match included, and booked none of the
+    // token's 4 matches a minute (else the last request below would be over on matches, not on
+    // rallies).
     let list: MatchList = get_as(a, "/api/v1/matches");
     assert_eq!(list.matches.len(), 1, "{list:?}");
     // What is left can be spent, and no more; a tournament counts all its matches' rallies.
-    assert_eq!(queue(40, &mine).0, 202);
-    assert_eq!(queue(1, &mine).0, 429);
+    assert_eq!(queue(39, &mine).0, 202);
+    assert_eq!(queue(1, &mine).0, 202);
+    let (code, v) = queue(1, &mine);
+    assert_eq!(code, 429, "{v}");
+    assert!(
+        v["error"]["message"].as_str().unwrap().contains("rallies"),
+        "{v}"
+    );
     let tour = NewTournament {
         kind: server::wire::TournamentKind::RoundRobin,
         agents: vec!["scripted".into(), "scripted-soft".into()],
@@ -83,12 +96,7 @@ fn a_token_asks_for_rallies_within_its_hourly_budget_an_sprt_counting_all_it_may
 }
 
 #[test]
-fn past_its_replay_quota_a_tokens_match_keeps_no_frames_and_replays_the_same() {
-    let dir = tempdir("replay_quota");
-    // A quota of 1 KiB: less than any rally's frames.
-    let srv = start_serve(&dir, 1, false, "replay_quota_mb = 0.001\n");
-    let a = srv.addr.as_str();
-    let mine = token(a, "lab");
+fn a_tokens_matches_keep_their_frames_within_its_replay_quota_and_none_past_it() {
     let q = serde_json::to_value(QueueMatch {
         a: "scripted".into(),
         b: "scripted-soft".into(),
@@ -96,25 +104,37 @@ fn past_its_replay_quota_a_tokens_match_keeps_no_frames_and_replays_the_same() {
         seed: Some(7),
     })
     .unwrap();
-    let mut played = Vec::new();
-    for who in [mine.as_str(), TOKEN] {
+    // Plays the match for `who` on `a`; its row and its rally's replay.
+    let play = |a: &str, who: &str| {
         let (code, m) = call(a, "POST", "/api/v1/matches", Some(&q), Some(who));
         assert_eq!(code, 202, "{m}");
         let id = m["id"].as_i64().unwrap();
         let done: MatchDetail =
             serde_json::from_value(wait_for(a, id, "done", Duration::from_secs(120))).unwrap();
-        let (code, replay) = call(
-            a,
-            "GET",
-            &format!("/api/v1/matches/{id}/replay?rally=0"),
-            None,
-            None,
-        );
+        let path = format!("/api/v1/matches/{id}/replay?rally=0");
+        let (code, replay) = call(a, "GET", &path, None, None);
         assert_eq!(code, 200, "{replay}");
-        played.push((done, replay));
+        (done, replay)
+    };
+    // Within the default quota (1 GiB) a token's matches keep their frames, and count them.
+    let dir = tempdir("replay_quota_within");
+    let srv = start_serve(&dir, 1, false, "");
+    let mine = token(&srv.addr, "lab");
+    let (first, _) = play(&srv.addr, &mine);
+    let (second, stored) = play(&srv.addr, &mine);
+    for m in [&first, &second] {
+        assert!(m.row.keep_replay && m.row.replay_bytes > 1024, "{m:?}");
     }
-    let [(over, resimulated), (kept, stored)] = <[_; 2]>::try_from(played).unwrap();
-    // The token's match kept nothing and counts nothing; the admin's (no quota) kept its frames.
+    assert_eq!(stored["resimulated"], false);
+    drop(srv);
+    // A quota of 1 KiB, less than any rally's frames: the token's match keeps none and counts
+    // none; the admin's (no quota) keeps its frames. Both replay the same frames, the first
+    // re-simulated.
+    let dir = tempdir("replay_quota_past");
+    let srv = start_serve(&dir, 1, false, "replay_quota_mb = 0.001\n");
+    let mine = token(&srv.addr, "lab");
+    let (over, resimulated) = play(&srv.addr, &mine);
+    let (kept, stored) = play(&srv.addr, TOKEN);
     assert_eq!(
         (over.row.keep_replay, over.row.replay_bytes),
         (false, 0),
@@ -124,7 +144,10 @@ fn past_its_replay_quota_a_tokens_match_keeps_no_frames_and_replays_the_same() {
         kept.row.keep_replay && kept.row.replay_bytes > 1024,
         "{kept:?}"
     );
-    // Both replay, the same frames: the one re-simulated, the other as stored.
+    assert_eq!(
+        kept.row.replay_bytes, second.row.replay_bytes,
+        "the same match, the same frames"
+    );
     assert_eq!(resimulated["resimulated"], true);
     assert_eq!(stored["resimulated"], false);
     assert_eq!(resimulated["frames"], stored["frames"]);

@@ -262,7 +262,19 @@ impl Checkpoint {
 
     /// The controller's gains or synergies against the model's muscles, and the grip floor.
     fn validate_controller(&self, space: &ActionSpace) -> Result<(), CheckpointError> {
-        if let ControllerSpec::Kmac { gains } | ControllerSpec::MusclePd { gains } =
+        if let ControllerSpec::Kmac {
+            activation_clamp: Some([lo, hi]),
+            ..
+        } = self.controller
+        {
+            if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi && hi <= 1.0) {
+                return Err(bad(
+                    "controller.activation_clamp",
+                    format!("[{lo}, {hi}]: must be [low, high] with 0 <= low < high <= 1"),
+                ));
+            }
+        }
+        if let ControllerSpec::Kmac { gains, .. } | ControllerSpec::MusclePd { gains } =
             &self.controller
         {
             if !(gains.kp.is_finite() && gains.kp > 0.0 && gains.kd.is_finite() && gains.kd >= 0.0)

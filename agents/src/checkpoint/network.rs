@@ -245,9 +245,13 @@ fn build_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError
         if n != 1 {
             return Err(TractError::msg(format!("it takes {n} inputs, not one")));
         }
-        m.with_input_fact(0, f32::fact([1, inputs]).into())?
-            .into_optimized()?
-            .into_runnable()
+        let optimized = m
+            .with_input_fact(0, f32::fact([1, inputs]).into())?
+            .into_optimized()?;
+        if let Some(why) = input_dependent(&optimized) {
+            return Err(TractError::msg(why));
+        }
+        optimized.into_runnable()
     }));
     match built {
         Ok(plan) => plan.map_err(|e| refuse(e.to_string())),
@@ -268,6 +272,42 @@ fn build_onnx(p: &OnnxPolicy, inputs: usize) -> Result<OnnxPlan, CheckpointError
 /// 1): 64 MiB, sixteen million floats — two orders of magnitude above the trained policies' largest
 /// layer, and far below what a server can afford per match and per replay.
 pub const MAX_TENSOR_BYTES: usize = 64 << 20;
+
+/// Why an optimised graph's cost could depend on its input, if it could: a control-flow node (a loop,
+/// a scan, a branch), or a node whose output shape is not known once the input's is (`NonZero`, a
+/// shape read from the data), or an intermediate tensor over [`MAX_TENSOR_BYTES`]. Without them every
+/// call allocates the same tensors and runs the same kernels, so what an admission measured (time,
+/// memory, the output's width) holds for every observation a match shows the network.
+fn input_dependent(model: &tract_onnx::prelude::TypedModel) -> Option<String> {
+    for node in model.nodes() {
+        let op = node.op.name();
+        if ["Scan", "Loop", "If"].iter().any(|c| op.contains(c)) {
+            return Some(format!(
+                "its node '{}' ({op}) is control flow: its work would depend on its input",
+                node.name
+            ));
+        }
+        for outlet in &node.outputs {
+            let Some(shape) = outlet.fact.shape.as_concrete() else {
+                return Some(format!(
+                    "its node '{}' ({op}) makes a tensor of shape {:?}, known only from the input's values",
+                    node.name, outlet.fact.shape
+                ));
+            };
+            let bytes = shape
+                .iter()
+                .product::<usize>()
+                .saturating_mul(outlet.fact.datum_type.size_of());
+            if bytes > MAX_TENSOR_BYTES {
+                return Some(format!(
+                    "its node '{}' ({op}) makes a tensor of {bytes} bytes; at most {MAX_TENSOR_BYTES}",
+                    node.name
+                ));
+            }
+        }
+    }
+    None
+}
 
 /// A tensor that a node of `g` (or of a subgraph) makes from a constant shape — ConstantOfShape,
 /// Expand, RandomNormal, RandomUniform — bigger than [`MAX_TENSOR_BYTES`]: its node and its bytes.

@@ -9,10 +9,31 @@ use sim::muscle;
 
 use super::*;
 
-/// Steps 2–5 of K-MAC for one muscle (docs/design.md §6): PD force on length, clipped to pulling, the
-/// activation that produces it with the simulator's own gain and bias (gain limited to ≤ −1 N), and
-/// the control that reaches that activation in one control step `dt` by inverting the activation
-/// dynamics.
+/// Steps 2–4 of K-MAC for one muscle (docs/design.md §6): PD force on length, clipped to pulling, and
+/// the activation that produces it with the simulator's own gain and bias (gain limited to ≤ −1 N),
+/// in [0, 1]. `None` for an actuator that is not a muscle.
+pub fn activation_target(
+    model: &Model,
+    a: usize,
+    l_target: f64,
+    now: &MuscleNow,
+    gains: &PdGains,
+) -> Option<f64> {
+    let (l, l_dot) = (now.length, now.velocity);
+    let actuator = &model.actuators[a];
+    let p = actuator.muscle()?;
+    let lr = actuator.lengthrange;
+    let f_max = p.peak_force(0.0);
+    let dl = (lr[1] - lr[0]).max(1e-9);
+    let f = f_max * (gains.kp * (l_target - l) - gains.kd * l_dot) / dl;
+    let f_star = f.clamp(-f_max, 0.0);
+    let gain = muscle::gain(p, l, l_dot, lr, 0.0).min(-1.0);
+    let bias = muscle::bias(p, l, lr, 0.0);
+    Some(((f_star - bias) / gain).clamp(0.0, 1.0))
+}
+
+/// Steps 2–5 of K-MAC for one muscle: [`activation_target`], then the control that reaches that
+/// activation in one control step `dt` by inverting the activation dynamics.
 pub fn muscle_pd_control(
     model: &Model,
     a: usize,
@@ -21,24 +42,21 @@ pub fn muscle_pd_control(
     gains: &PdGains,
     dt: f64,
 ) -> f64 {
-    let (l, l_dot, act) = (now.length, now.velocity, now.act);
-    let actuator = &model.actuators[a];
-    let Some(p) = actuator.muscle() else {
+    let Some(act_star) = activation_target(model, a, l_target, now, gains) else {
         return 0.0;
     };
-    let lr = actuator.lengthrange;
-    let f_max = p.peak_force(0.0);
-    let dl = (lr[1] - lr[0]).max(1e-9);
-    let f = f_max * (gains.kp * (l_target - l) - gains.kd * l_dot) / dl;
-    let f_star = f.clamp(-f_max, 0.0);
-    let gain = muscle::gain(p, l, l_dot, lr, 0.0).min(-1.0);
-    let bias = muscle::bias(p, l, lr, 0.0);
-    let act_star = ((f_star - bias) / gain).clamp(0.0, 1.0);
-    let tau = match actuator.dynamics {
-        Dynamics::Muscle(d) => muscle::time_constant(act_star, act, &d),
+    let tau = match model.actuators[a].dynamics {
+        Dynamics::Muscle(d) => muscle::time_constant(act_star, now.act, &d),
         Dynamics::None => return act_star,
     };
-    (act + (act_star - act) * tau / dt).clamp(0.0, 1.0)
+    (now.act + (act_star - now.act) * tau / dt).clamp(0.0, 1.0)
+}
+
+/// The official code's activation clamp, [σ(−7.5), σ(2.5)] ≈ [0.00055, 0.924]: its K-MAC sends the
+/// activation target itself as the control, within these bounds.
+pub fn official_activation_clamp() -> [f64; 2] {
+    let sigmoid = |x: f64| 1.0 / (1.0 + (-x).exp());
+    [sigmoid(-7.5), sigmoid(2.5)]
 }
 
 /// K-MAC: target joint positions → muscle controls.
@@ -48,6 +66,12 @@ pub struct Kmac {
     pub space: ActionSpace,
     /// Length PD gains.
     pub gains: PdGains,
+    /// The official code's form: the activation target is the control, clamped to these bounds
+    /// (see [`official_activation_clamp`]); `None`: ours, the control that reaches the target in
+    /// one control step (the activation dynamics inverted), in [0, 1].
+    pub activation_clamp: Option<[f64; 2]>,
+    /// Training noise on the activations: σ and its seeded stream (the official code's 0.1).
+    activation_noise: Option<(f64, sim::rng::Rng)>,
     target: MuscleGeometry,
     current: MuscleGeometry,
     qpos_target: Vec<f64>,
@@ -59,10 +83,24 @@ impl Kmac {
         Kmac {
             space: ActionSpace::new(model),
             gains,
+            activation_clamp: None,
+            activation_noise: None,
             target: MuscleGeometry::new(model),
             current: MuscleGeometry::new(model),
             qpos_target: model.qpos0.clone(),
         }
+    }
+
+    /// K-MAC in the official code's form when `clamp` is given (see [`Kmac::activation_clamp`]).
+    pub fn with_activation_clamp(mut self, clamp: Option<[f64; 2]>) -> Kmac {
+        self.activation_clamp = clamp;
+        self
+    }
+
+    /// Adds Gaussian noise of `sigma` to every muscle's activation target (before the clamp), drawn
+    /// from a stream seeded with `seed` (training only; `sigma = 0` removes it).
+    pub fn set_activation_noise(&mut self, sigma: f64, seed: u64) {
+        self.activation_noise = (sigma > 0.0).then(|| (sigma, sim::rng::Rng::seeded(seed)));
     }
 
     /// Writes controls for every actuator into `ctrl`, given target positions of `space.joints`.
@@ -86,7 +124,17 @@ impl Kmac {
         for &a in &self.space.muscles {
             let l_star = self.target.length(model, a, &self.qpos_target);
             let now = self.current.now(model, a, state);
-            ctrl[a] = muscle_pd_control(model, a, l_star, &now, &self.gains, dt);
+            let noise = match &mut self.activation_noise {
+                Some((sigma, rng)) => *sigma * rng.normal(),
+                None => 0.0,
+            };
+            ctrl[a] = match self.activation_clamp {
+                None if noise == 0.0 => muscle_pd_control(model, a, l_star, &now, &self.gains, dt),
+                None => (muscle_pd_control(model, a, l_star, &now, &self.gains, dt) + noise)
+                    .clamp(0.0, 1.0),
+                Some([lo, hi]) => activation_target(model, a, l_star, &now, &self.gains)
+                    .map_or(0.0, |act| (act + noise).clamp(lo, hi)),
+            };
         }
         // The pelvis follows its servos.
         for (servo, &z) in self.space.servos.iter().zip(targets) {

@@ -17,7 +17,9 @@ mod muscle_pd;
 
 pub use direct::{direct_control, direct_controls};
 pub use dynsyn::Synergies;
-pub use kmac::{gravity_offset, muscle_pd_control, Kmac};
+pub use kmac::{
+    activation_target, gravity_offset, muscle_pd_control, official_activation_clamp, Kmac,
+};
 pub use muscle_pd::MusclePd;
 
 use serde::{Deserialize, Serialize};
@@ -164,6 +166,13 @@ pub enum ControllerSpec {
     Kmac {
         /// Length PD gains.
         gains: PdGains,
+        /// The official code's form: the joint targets span each joint's range exactly and the
+        /// activation target is the control, clamped to these bounds (its [σ(−7.5), σ(2.5)]);
+        /// absent: ours, targets over the range widened by [`TARGET_MARGIN`] and the control that
+        /// reaches the activation target in one control step, in [0, 1] (the default robot's
+        /// checkpoints).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        activation_clamp: Option<[f64; 2]>,
     },
     /// Muscle-PD.
     MusclePd {
@@ -224,10 +233,10 @@ fn joint_range(model: &Model, j: usize) -> [f64; 2] {
 /// without the margin no action could squeeze the paddle).
 pub const TARGET_MARGIN: f64 = 0.05;
 
-/// The joint targets a K-MAC action spans: the range widened by [`TARGET_MARGIN`] at both ends.
-fn target_range(model: &Model, j: usize) -> [f64; 2] {
+/// The joint targets a K-MAC action spans: the range widened by `margin` of it at both ends.
+fn target_range(model: &Model, j: usize, margin: f64) -> [f64; 2] {
     let [lo, hi] = joint_range(model, j);
-    let m = TARGET_MARGIN * (hi - lo);
+    let m = margin * (hi - lo);
     [lo - m, hi + m]
 }
 
@@ -241,22 +250,30 @@ impl ActionSpace {
     /// The range a K-MAC action entry `k` spans: the servo's control range for a servo joint, the
     /// joint's range widened by [`TARGET_MARGIN`] otherwise.
     pub fn kmac_target_range(&self, model: &Model, k: usize) -> [f64; 2] {
+        self.target_range_with(model, k, TARGET_MARGIN)
+    }
+
+    fn target_range_with(&self, model: &Model, k: usize, margin: f64) -> [f64; 2] {
         let j = self.joints[k];
         match self.servos[k] {
             Some(s) => servo_range(model, s, j),
-            None => target_range(model, j),
+            None => target_range(model, j, margin),
         }
     }
 
     /// The joint targets a K-MAC action asks for, one per entry of `joints` (entries clipped to
-    /// [−1, 1]).
+    /// [−1, 1]), over [`ActionSpace::kmac_target_range`].
     pub fn kmac_targets(&self, model: &Model, action: &[f64]) -> Vec<f64> {
+        self.targets_with(model, action, TARGET_MARGIN)
+    }
+
+    fn targets_with(&self, model: &Model, action: &[f64], margin: f64) -> Vec<f64> {
         action
             .iter()
             .take(self.joints.len())
             .enumerate()
             .map(|(k, &a)| {
-                let r = self.kmac_target_range(model, k);
+                let r = self.target_range_with(model, k, margin);
                 scale(a, r[0], r[1])
             })
             .collect()
@@ -267,9 +284,12 @@ impl ActionMapper {
     /// The mapper for `spec` on `model`.
     pub fn new(model: &Model, spec: &ControllerSpec) -> ActionMapper {
         match spec {
-            ControllerSpec::Kmac { gains } => {
-                ActionMapper::Kmac(Box::new(Kmac::new(model, *gains)))
-            }
+            ControllerSpec::Kmac {
+                gains,
+                activation_clamp,
+            } => ActionMapper::Kmac(Box::new(
+                Kmac::new(model, *gains).with_activation_clamp(*activation_clamp),
+            )),
             ControllerSpec::MusclePd { gains } => {
                 ActionMapper::MusclePd(Box::new(MusclePd::new(model, *gains)))
             }
@@ -277,6 +297,14 @@ impl ActionMapper {
             ControllerSpec::Dynsyn { synergies } => {
                 ActionMapper::Dynsyn(ActionSpace::new(model), synergies.clone())
             }
+        }
+    }
+
+    /// Training noise on K-MAC's activations (σ, seeded stream; see [`Kmac::set_activation_noise`]);
+    /// the other controllers have no activation of their own to perturb.
+    pub fn set_activation_noise(&mut self, sigma: f64, seed: u64) {
+        if let ActionMapper::Kmac(k) = self {
+            k.set_activation_noise(sigma, seed);
         }
     }
 
@@ -353,7 +381,14 @@ impl ActionMapper {
         };
         match self {
             ActionMapper::Kmac(k) => {
-                let targets = k.space.kmac_targets(model, action);
+                // The official form spans each joint's range exactly (`lo + (a + 1)/2·(hi − lo)`);
+                // ours widens it (see TARGET_MARGIN).
+                let margin = if k.activation_clamp.is_some() {
+                    0.0
+                } else {
+                    TARGET_MARGIN
+                };
+                let targets = k.space.targets_with(model, action, margin);
                 k.controls(model, state, &targets, dt, ctrl);
             }
             ActionMapper::MusclePd(m) => {

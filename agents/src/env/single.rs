@@ -24,6 +24,16 @@ pub enum EpisodeEnd {
     Training,
 }
 
+/// The official code's training noise: Gaussian, σ on the policy's actions (in [−1, 1], clipped
+/// after) and σ on K-MAC's activation targets (before its clamp), from streams seeded per episode.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct TrainingNoise {
+    /// σ on every action entry.
+    pub action: f64,
+    /// σ on every muscle's activation target (K-MAC only).
+    pub activation: f64,
+}
+
 /// One step of the environment.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Transition {
@@ -67,6 +77,10 @@ pub struct Env {
     pub grip_floor: f64,
     /// Balls recorded from rallies, served instead of `kind` in a fraction of episodes.
     pub bank: Option<BallBank>,
+    /// Training noise (the official code's): σ on the actions, σ on K-MAC's activation targets; 0:
+    /// none (evaluation).
+    pub noise: TrainingNoise,
+    noise_rng: Rng,
     obs: Vec<f64>,
     ctrl: Vec<f64>,
     bounce: BounceModel,
@@ -97,6 +111,8 @@ impl Env {
             end: EpisodeEnd::Rules,
             grip_floor: 0.0,
             bank: None,
+            noise: TrainingNoise::default(),
+            noise_rng: Rng::seeded(0),
             obs: Vec::new(),
             bounce: BounceModel::for_table(&preset.table),
             stroke: StrokeReward::default(),
@@ -136,6 +152,13 @@ impl Env {
             None => self.episode.reset(self.kind, &mut rng, None),
         }
         self.observer.reset(planner_seed);
+        if self.noise.action > 0.0 || self.noise.activation > 0.0 {
+            // Streams of their own, so that the serve and the planner draw as without noise.
+            let noise_seed = crate::seeds::mix64(planner_seed.wrapping_add(1));
+            self.noise_rng = Rng::seeded(noise_seed);
+            self.mapper
+                .set_activation_noise(self.noise.activation, crate::seeds::mix64(noise_seed));
+        }
         self.stroke = StrokeReward::default();
         self.predicted_success = false;
         let (robot, ball, t) = (
@@ -170,6 +193,17 @@ impl Env {
         }
         let model = self.episode.robot.held_model().clone();
         self.ctrl.copy_from_slice(&self.episode.robot.state.ctrl);
+        let noisy: Vec<f64>;
+        let action = if self.noise.action > 0.0 {
+            let (sigma, rng) = (self.noise.action, &mut self.noise_rng);
+            noisy = action
+                .iter()
+                .map(|a| (a + sigma * rng.normal()).clamp(-1.0, 1.0))
+                .collect();
+            &noisy[..]
+        } else {
+            action
+        };
         self.mapper.controls(
             &model,
             &self.episode.robot.state,

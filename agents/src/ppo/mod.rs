@@ -293,6 +293,16 @@ pub struct ControllerConfig {
     pub dynsyn_seed: u64,
     /// Least control of the grip muscles, for every method (ours; see `controller::apply_grip_floor`).
     pub grip_floor: f64,
+    /// K-MAC in the official code's form: the activation target is the control, clamped to these
+    /// bounds (official [σ(−7.5), σ(2.5)]); absent: ours (the activation dynamics inverted).
+    #[serde(default)]
+    pub kmac_activation_clamp: Option<[f64; 2]>,
+    /// Training noise, σ, on the policy's actions (in [−1, 1] units, every method; official 0.05).
+    #[serde(default)]
+    pub action_noise: f64,
+    /// Training noise, σ, on K-MAC's activation targets (official 0.1).
+    #[serde(default)]
+    pub activation_noise: f64,
 }
 
 impl Default for ControllerConfig {
@@ -303,6 +313,9 @@ impl Default for ControllerConfig {
             dynsyn_groups: 12,
             dynsyn_seed: 1,
             grip_floor: 0.1,
+            kmac_activation_clamp: None,
+            action_noise: 0.0,
+            activation_noise: 0.0,
         }
     }
 }
@@ -405,6 +418,7 @@ impl TrainConfig {
         match method {
             Method::Kmac => ControllerSpec::Kmac {
                 gains: self.controller.kmac,
+                activation_clamp: self.controller.kmac_activation_clamp,
             },
             Method::Muscle => ControllerSpec::Direct,
             Method::MusclePd => ControllerSpec::MusclePd {
@@ -423,7 +437,7 @@ impl TrainConfig {
     /// Refuses settings PPO cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         let p = &self.ppo;
-        let checks: [(&str, bool); 17] = [
+        let checks: [(&str, bool); 20] = [
             ("ppo.envs", p.envs >= 1),
             ("ppo.steps_per_env", p.steps_per_env >= 1),
             ("ppo.epochs", p.epochs >= 1),
@@ -477,6 +491,20 @@ impl TrainConfig {
             (
                 "controller.grip_floor",
                 (0.0..=1.0).contains(&self.controller.grip_floor),
+            ),
+            (
+                "controller.kmac_activation_clamp",
+                self.controller
+                    .kmac_activation_clamp
+                    .is_none_or(|[lo, hi]| 0.0 <= lo && lo < hi && hi <= 1.0),
+            ),
+            (
+                "controller.action_noise",
+                (0.0..=1.0).contains(&self.controller.action_noise),
+            ),
+            (
+                "controller.activation_noise",
+                (0.0..=1.0).contains(&self.controller.activation_noise),
             ),
         ];
         match checks.iter().find(|(_, ok)| !ok) {

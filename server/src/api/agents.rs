@@ -158,38 +158,61 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     if let Some(a) = db::agent_by_name(&s.pool, &body.name).await? {
         return Err(ApiError::name_taken("an agent", &a.name));
     }
-    let text = body.checkpoint.get().to_string();
+    let busy = || ApiError {
+        retry_after: Some(30),
+        ..ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "busy",
+            format!(
+                "{} submissions already wait for their admission (admission_queue); retry later",
+                s.settings.admission_queue
+            ),
+        )
+    };
+    if s.admit_waiting.load(std::sync::atomic::Ordering::SeqCst) >= s.settings.admission_queue {
+        return Err(busy());
+    }
     charge(&s, caller, &[(Budget::Agents, 1)])?;
+    let text = body.checkpoint.get().to_string();
+    drop(body.checkpoint);
     let refused = |code: &'static str, message: String| ApiError {
         field: Some("checkpoint".into()),
         ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, code, message)
     };
     use crate::admission::Refused;
-    let mut report = match crate::admission::admit_submission(&s, text.clone()).await? {
-        Ok(report) => report,
-        Err(Refused::Invalid(e)) => return Err(refused("invalid_checkpoint", e)),
-        Err(Refused::Failed(e)) => return Err(refused("qualification_failed", e)),
-        Err(Refused::Crashed(e)) => return Err(refused("invalid_checkpoint", e)),
-        Err(Refused::OverCpu(budget)) => {
-            return Err(refused(
-                "over_budget",
-                format!(
+    let mut report =
+        match crate::admission::admit_submission(&s, text.clone()).await? {
+            Err(Refused::Busy) => return Err(busy()),
+            Ok(report) => report,
+            Err(Refused::Invalid(e)) => return Err(refused("invalid_checkpoint", e)),
+            Err(Refused::Failed(e)) => return Err(refused("qualification_failed", e)),
+            Err(Refused::Crashed(e)) => return Err(refused("invalid_checkpoint", e)),
+            Err(Refused::OverCpu(budget)) => {
+                return Err(refused(
+                    "over_budget",
+                    format!(
                     "admitting the checkpoint (validating it, building its network, playing its \
                      qualification) used more than the server's admission_cpu_s ({budget} s of CPU \
                      time)"
                 ),
-            ))
-        }
-        Err(Refused::OverMemory(budget, what)) => {
-            return Err(refused(
+                ))
+            }
+            Err(Refused::Killed) => return Err(refused(
                 "over_budget",
-                format!(
-                    "admitting the checkpoint asked for more memory than the server's \
+                "admitting the checkpoint got its process killed: past its hard CPU-time limit \
+                 (admission_cpu_s) or by the kernel's out-of-memory killer (admission_memory_mb)"
+                    .into(),
+            )),
+            Err(Refused::OverMemory(budget, what)) => {
+                return Err(refused(
+                    "over_budget",
+                    format!(
+                        "admitting the checkpoint asked for more memory than the server's \
                      admission_memory_mb ({budget} MiB): {what}"
-                ),
-            ))
-        }
-    };
+                    ),
+                ))
+            }
+        };
     // The report names the agent as submitted (not the checkpoint's inner name).
     report.agent = body.name.clone();
     crate::admission::admits(&s.settings, &report)

@@ -225,6 +225,13 @@ pub(super) async fn get_replay(
             format!("match {id} has rallies 0 to {}", m.rallies - 1),
         ));
     }
+    // A few replays are read at a time (as many as there are workers): each holds a rally's frames
+    // (and, re-simulated, both agents' checkpoints) while it is made.
+    let _turn = s
+        .resim
+        .acquire()
+        .await
+        .map_err(|e| anyhow::anyhow!("replay queue closed: {e}"))?;
     // The frames: stored (compressed) or re-simulated (JSON).
     let (frames, resimulated) = if m.keep_replay {
         let gz = db::replay(&s.pool, id, rally).await?.ok_or_else(|| {
@@ -251,11 +258,6 @@ pub(super) async fn get_replay(
             }
         };
         let agents = [spec_of(m.agent_a).await?, spec_of(m.agent_b).await?];
-        let _turn = s
-            .resim
-            .acquire()
-            .await
-            .map_err(|e| anyhow::anyhow!("re-simulation queue closed: {e}"))?;
         let st = s.clone();
         let frames = tokio::task::spawn_blocking(move || {
             crate::scheduler::resimulate_rally(&st, &m, agents, rally as u32)

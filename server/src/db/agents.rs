@@ -120,18 +120,20 @@ pub async fn insert_checkpoint_agent(
     .await
 }
 
-/// A checkpoint's `training` section as JSON text (`null` when it has none or the text is not a
-/// checkpoint's JSON), read without building the rest of the checkpoint (its weights are skipped).
+/// A checkpoint's `training` section as compact JSON text, re-serialised from its fields (`null`
+/// when it has none or the text is not a checkpoint's JSON): what validation bounded, whatever
+/// space or digits the upload padded it with. The weights are skipped, not parsed.
 pub fn training_of(spec: &str) -> String {
     #[derive(serde::Deserialize)]
     struct Part {
         #[serde(default)]
-        training: Option<Box<serde_json::value::RawValue>>,
+        training: Option<::agents::checkpoint::Training>,
     }
     serde_json::from_str::<Part>(spec)
         .ok()
         .and_then(|p| p.training)
-        .map_or_else(|| "null".to_string(), |t| t.get().to_string())
+        .and_then(|t| serde_json::to_string(&t).ok())
+        .unwrap_or_else(|| "null".to_string())
 }
 
 /// A checkpoint agent's training provenance (its checkpoint's `training` section), if it has one.
@@ -148,21 +150,28 @@ pub async fn agent_training(pool: &Pool, id: i64) -> sqlx::Result<Option<serde_j
 }
 
 /// Fills in the training provenance of the checkpoint agents stored before it had a column of its
-/// own (migration 0007), once: at every open it finds none left. Returns how many it filled.
+/// own (migration 0007), a few at a time, once: at every open it finds none left. Returns how many
+/// it filled.
 pub async fn extract_training(pool: &Pool) -> sqlx::Result<usize> {
-    let missing: Vec<(i64, String)> = sqlx::query_as(
-        "SELECT id, spec FROM agents WHERE kind = 'checkpoint' AND training_json IS NULL",
-    )
-    .fetch_all(pool)
-    .await?;
-    for (id, spec) in &missing {
-        sqlx::query("UPDATE agents SET training_json = $1 WHERE id = $2")
-            .bind(training_of(spec))
-            .bind(id)
-            .execute(pool)
-            .await?;
+    let mut filled = 0;
+    loop {
+        let batch: Vec<(i64, String)> = sqlx::query_as(
+            "SELECT id, spec FROM agents WHERE kind = 'checkpoint' AND training_json IS NULL ORDER BY id LIMIT 16",
+        )
+        .fetch_all(pool)
+        .await?;
+        if batch.is_empty() {
+            return Ok(filled);
+        }
+        for (id, spec) in &batch {
+            sqlx::query("UPDATE agents SET training_json = $1 WHERE id = $2")
+                .bind(training_of(spec))
+                .bind(id)
+                .execute(pool)
+                .await?;
+        }
+        filled += batch.len();
     }
-    Ok(missing.len())
 }
 
 /// Rewrites the spec hashes of a store written before they were SHA-256 (32 hex digits then):
@@ -222,20 +231,40 @@ mod tests {
             .unwrap()
             .expect("provenance");
         let full: serde_json::Value = serde_json::from_str(kmac).unwrap();
-        assert_eq!(training, full["training"]);
+        // Stored re-serialised from its fields (the defaults written out).
+        let parsed: ::agents::checkpoint::Training =
+            serde_json::from_value(full["training"].clone()).unwrap();
+        let expected = serde_json::to_value(&parsed).unwrap();
+        assert!(
+            training == expected,
+            "the stored provenance is the checkpoint's"
+        );
         assert_eq!(agent_training(&pool, none).await.unwrap(), None);
+        // Padding inside the section is not stored: a 1 MB upload of it keeps its few kilobytes.
+        let section = serde_json::to_string(&full["training"]).unwrap();
+        let padded = format!(
+            "{{\"training\": {{{}{}}}",
+            " ".repeat(1 << 20),
+            &section[1..]
+        );
+        let pad = insert_checkpoint_agent(&pool, "padded", &padded, qual, false, None)
+            .await
+            .unwrap();
+        let (stored,): (String,) = sqlx::query_as("SELECT training_json FROM agents WHERE id = $1")
+            .bind(pad)
+            .fetch_one(&pool)
+            .await
+            .unwrap();
+        assert!(stored.len() < 64 << 10, "{} bytes stored", stored.len());
         // A store from before the column: filled in at open, once.
         sqlx::query("UPDATE agents SET training_json = NULL")
             .execute(&pool)
             .await
             .unwrap();
         assert_eq!(agent_training(&pool, id).await.unwrap(), None);
-        assert_eq!(extract_training(&pool).await.unwrap(), 2);
+        assert_eq!(extract_training(&pool).await.unwrap(), 3);
         assert_eq!(extract_training(&pool).await.unwrap(), 0);
-        assert_eq!(
-            agent_training(&pool, id).await.unwrap(),
-            Some(full["training"].clone())
-        );
+        assert!(agent_training(&pool, id).await.unwrap() == Some(expected));
         pool.close().await;
     }
 

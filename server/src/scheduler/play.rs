@@ -246,7 +246,9 @@ pub(super) async fn run_one(
 ) -> anyhow::Result<()> {
     let claimed = std::time::Instant::now();
     if let Ok(mut playing) = state.playing.lock() {
-        playing.insert(m.id, Arc::new(AtomicBool::new(false)));
+        // Claimed as a shutdown's deadline passed: it stops at its first rally's end, queued again.
+        let stop = state.shutting_down.load(Ordering::SeqCst);
+        playing.insert(m.id, Arc::new(AtomicBool::new(stop)));
     }
     // The live channel first: the match is `running` from its claim on, so a viewer may ask for
     // its feed before the agents' specs are read (seen in CI: 409 while the specs were fetched).

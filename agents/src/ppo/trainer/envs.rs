@@ -135,6 +135,10 @@ pub(super) fn make_env(
             )?;
             env.end = EpisodeEnd::Training;
             env.grip_floor = grip_floor;
+            env.noise = crate::env::TrainingNoise {
+                action: config.controller.action_noise,
+                activation: config.controller.activation_noise,
+            };
             env.bank = bank.cloned();
             let (o, a) = (env.obs_dim(), env.action_dim());
             (TrainingEnv::Single(Box::new(env)), o, a)
