@@ -89,6 +89,32 @@ fn a_token_asks_for_rallies_within_its_hourly_budget_an_sprt_counting_all_it_may
         Some(&mine),
     );
     assert_eq!(code, 429);
+    // A request that no wait would let through is not a 429: an SPRT that may play 10 000 rallies.
+    let huge = serde_json::to_value(NewSprt {
+        rallies_per_match: 10,
+        max_matches: 1000,
+        ..NewSprt::new("scripted".into(), "scripted-soft".into())
+    })
+    .unwrap();
+    let (code, v) = call(
+        a,
+        "POST",
+        "/api/v1/sprt",
+        Some(&huge),
+        Some(&token(a, "big")),
+    );
+    assert_eq!(
+        (code, v["error"]["code"].as_str()),
+        (422, Some("over_limit")),
+        "{v}"
+    );
+    assert!(
+        v["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("max_rallies_per_hour"),
+        "{v}"
+    );
     // Another token has its own budget; the admin has none.
     assert_eq!(queue(100, &token(a, "other")).0, 202);
     let (code, v) = call(a, "POST", "/api/v1/sprt", Some(&sprt), Some(TOKEN));

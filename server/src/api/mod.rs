@@ -266,10 +266,22 @@ fn over_budget(
         ..ApiError::new(StatusCode::TOO_MANY_REQUESTS, "rate_limited", message)
     };
     if n > limit {
-        return Err(limited(
-            format!("this request would {verb} {n} {noun}; a token may {verb} at most {limit} per {per}"),
-            window,
-        ));
+        // Never within the budget, however long it waits: not a 429.
+        let setting = match budget {
+            Budget::Matches => "max_matches_per_minute",
+            Budget::Rallies => "max_rallies_per_hour",
+            Budget::Agents => "max_agents_per_hour",
+        };
+        return Err(ApiError {
+            field: Some("rate".into()),
+            ..ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "over_limit",
+                format!(
+                    "this request would {verb} {n} {noun}; a token may {verb} at most {limit} per {per} ({setting})"
+                ),
+            )
+        });
     }
     let window_d = std::time::Duration::from_secs(window);
     let mine = log.entry((token, budget)).or_default();

@@ -102,23 +102,26 @@ pub async fn agent_crossings(
     Ok((total, rows(found)))
 }
 
-/// An agent's rating history: how many points it has, and the newest `limit` of them, oldest first.
+/// An agent's rating history: how many points it has, and the newest `limit` of them, oldest first
+/// (one transaction: the count is the page's).
 pub async fn rating_history(
     pool: &Pool,
     agent: i64,
     limit: i64,
 ) -> sqlx::Result<(i64, Vec<RatingPoint>)> {
+    let mut tx = pool.begin().await?;
     let (total,): (i64,) =
         sqlx::query_as("SELECT COUNT(*) FROM rating_history WHERE agent_id = $1")
             .bind(agent)
-            .fetch_one(pool)
+            .fetch_one(&mut *tx)
             .await?;
     let mut newest = sqlx::query_as::<_, Row<RatingPoint>>("SELECT seq, match_id, rating, deviation, volatility, created_at FROM rating_history WHERE agent_id = $1 ORDER BY seq DESC LIMIT $2")
         .bind(agent)
         .bind(limit)
-        .fetch_all(pool)
+        .fetch_all(&mut *tx)
         .await
         .map(rows)?;
+    tx.commit().await?;
     newest.reverse();
     Ok((total, newest))
 }
