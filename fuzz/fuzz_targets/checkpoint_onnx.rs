@@ -24,6 +24,7 @@ fuzz_target!(|data: &[u8]| {
         name: "fuzz".into(),
         controller: ControllerSpec::Kmac {
             gains: PdGains { kp: 10.0, kd: 1.0 },
+            activation_clamp: None,
         },
         observation: ObservationSpec {
             blocks: ObsBlock::ALL.to_vec(),
