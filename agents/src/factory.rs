@@ -32,8 +32,8 @@ pub enum PlayerSpec {
 }
 
 impl PlayerSpec {
-    /// A scripted variant's name, a built-in checkpoint's name (`kmac`, `kmac-rally`, …: compiled
-    /// into the binary, found from any directory), or else a checkpoint file to read (through
+    /// A scripted variant's name, a built-in checkpoint's name of `model`'s robot (`kmac`,
+    /// `kmac-rally`, …: compiled into the binary, found from any directory), or else a checkpoint file to read (through
     /// `read`) and validate.
     pub fn resolve(
         name: &str,
@@ -43,7 +43,8 @@ impl PlayerSpec {
         if let Some(s) = PlayerSpec::scripted(name) {
             return Ok(s);
         }
-        let text = match crate::builtins::checkpoint(name) {
+        let robot = sim::config::robot_name(model);
+        let text = match crate::builtins::checkpoint_of(robot, name) {
             Some(text) => text.to_string(),
             None => read(name).map_err(|e| {
                 let scripted: Vec<&str> = crate::scripted::variants()
@@ -53,7 +54,7 @@ impl PlayerSpec {
                 format!(
                     "'{name}' is neither a scripted agent ({}), a built-in checkpoint ({}) nor a readable checkpoint file: {e}",
                     scripted.join(", "),
-                    crate::builtins::names().join(", ")
+                    crate::builtins::names_of(robot).join(", ")
                 )
             })?,
         };

@@ -66,6 +66,32 @@ fn refused(m: &Model, ck: &Checkpoint, field: &str) {
 }
 
 #[test]
+fn a_checkpoint_names_its_robot_and_another_robot_refuses_it() {
+    let m = model();
+    let ck = Checkpoint::template(&m, "t", kmac(), &[16], Activation::Tanh);
+    assert_eq!(ck.model, "default");
+    let text = serde_json::to_string(&ck).unwrap();
+    assert!(text.contains(r#""model":"default""#), "{text}");
+    // A file from before the field plays the default robot.
+    let mut old: serde_json::Value = serde_json::from_str(&text).unwrap();
+    old.as_object_mut().unwrap().remove("model");
+    let back = Checkpoint::from_json(&old.to_string(), &m).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(back.model, "default");
+    // The same shapes on a robot of another name: refused for the robot, both names said.
+    let mut other = (*m).clone();
+    other.name = "other_body".into();
+    let e = Checkpoint::from_json(&text, &other).expect_err("another robot's checkpoint");
+    assert_eq!(e.field, "model");
+    assert!(
+        e.to_string().contains("default") && e.to_string().contains("other_body"),
+        "{e}"
+    );
+    let mut c = ck.clone();
+    c.model = "myochallenge".into();
+    refused(&m, &c, "model");
+}
+
+#[test]
 fn bad_checkpoints_are_refused_naming_the_field() {
     let m = model();
     let good = Checkpoint::template(&m, "t", kmac(), &[16], Activation::Tanh);

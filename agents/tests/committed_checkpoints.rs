@@ -77,8 +77,24 @@ fn a_rally_match_between_committed_checkpoints_is_bit_identical_per_seed() {
 #[test]
 fn the_binary_carries_every_committed_checkpoint_as_committed() {
     // `agents::builtins` is how `rally` finds a built-in from any directory: it must list every file
-    // of config/checkpoints/, each with the file's text.
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/checkpoints");
+    // of config/checkpoints/ (and of config/checkpoints/myochallenge/), each with the file's text.
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/checkpoints");
+    carried(root, agents::builtins::CHECKPOINTS);
+    carried(
+        &format!("{root}/myochallenge"),
+        agents::builtins::MYOCHALLENGE_CHECKPOINTS,
+    );
+    for (name, text) in agents::builtins::MYOCHALLENGE_CHECKPOINTS {
+        let model: serde_json::Value = serde_json::from_str(text).unwrap();
+        assert_eq!(model["model"], "myochallenge", "{name} names its robot");
+        assert_eq!(
+            agents::builtins::checkpoint_of("myochallenge", name),
+            Some(*text)
+        );
+    }
+}
+
+fn carried(dir: &str, list: &[(&str, &str)]) {
     let mut on_disk: Vec<(String, String)> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -89,14 +105,14 @@ fn the_binary_carries_every_committed_checkpoint_as_committed() {
         })
         .collect();
     on_disk.sort();
-    let embedded: Vec<(String, String)> = agents::builtins::CHECKPOINTS
+    let embedded: Vec<(String, String)> = list
         .iter()
         .map(|(n, t)| (n.to_string(), t.to_string()))
         .collect();
     assert_eq!(
         embedded.iter().map(|(n, _)| n).collect::<Vec<_>>(),
         on_disk.iter().map(|(n, _)| n).collect::<Vec<_>>(),
-        "agents/src/builtins.rs lists config/checkpoints/ (sorted)"
+        "agents/src/builtins.rs lists {dir} (sorted)"
     );
     for ((name, a), (_, b)) in embedded.iter().zip(&on_disk) {
         assert!(a == b, "{name}: the embedded copy differs from the file");

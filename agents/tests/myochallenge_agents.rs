@@ -103,6 +103,7 @@ fn every_method_trains_on_it_and_its_run_resumes_only_on_it() {
         .unwrap_or_else(|e| panic!("{method:?}: {e}"));
         t.iterate().unwrap();
         let ck = t.checkpoint("probe", "test", "none").unwrap();
+        assert_eq!(ck.model, "myochallenge", "{method:?}");
         ck.validate(&m)
             .unwrap_or_else(|e| panic!("{method:?}: {e}"));
         let e = Evaluation {

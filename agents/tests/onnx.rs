@@ -17,6 +17,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
         format: FORMAT.into(),
         version: VERSION,
         name: "onnx-fixture".into(),
+        model: "default".into(),
         controller: ControllerSpec::Kmac {
             gains: PdGains { kp: 40.0, kd: 3.0 },
             activation_clamp: None,

@@ -22,6 +22,7 @@ fuzz_target!(|data: &[u8]| {
         format: FORMAT.into(),
         version: VERSION,
         name: "fuzz".into(),
+        model: "default".into(),
         controller: ControllerSpec::Kmac {
             gains: PdGains { kp: 10.0, kd: 1.0 },
             activation_clamp: None,

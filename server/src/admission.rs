@@ -49,9 +49,12 @@ pub fn wall_bound(settings: &Settings) -> Duration {
 /// process of this executable (`rally checkpoint admit`) that limits its own CPU time
 /// (`admission_cpu_s`) and memory (`admission_memory_mb`), so a graph that allocates without
 /// bound or runs without end costs the server neither memory nor its threads. The outer error is
-/// the server's (the child could not be started), the inner one the checkpoint's.
+/// the server's (the child could not be started), the inner one the checkpoint's. `robot` is the
+/// robot the checkpoint names, one this server plays: the child loads it (from the data directory
+/// for MyoSuite's) and qualifies the checkpoint in its arena.
 pub async fn admit_submission(
     state: &AppState,
+    robot: &str,
     text: String,
 ) -> anyhow::Result<Result<EvalReport, Refused>> {
     let s = &state.settings;
@@ -79,8 +82,11 @@ pub async fn admit_submission(
         .arg(s.admission_cpu_s.to_string())
         .arg("--memory-mb")
         .arg(s.admission_memory_mb.to_string())
-        // Nothing of the server's environment (its admin token, its database's password).
+        .args(["--model", robot])
+        // Nothing of the server's environment (its admin token, its database's password) but
+        // where the imported robots are.
         .env_clear()
+        .env("RALLY_DATA_DIR", crate::settings::data_dir())
         .env("RUST_LOG", "warn")
         .env("RUST_BACKTRACE", "0")
         .stdin(Stdio::piped())
@@ -170,12 +176,16 @@ fn outcome(s: &Settings, a: Admission) -> Result<EvalReport, Refused> {
     }
 }
 
-/// Admits a trusted checkpoint (a built-in) in this process, on the blocking pool, in turn with
-/// the submissions.
-async fn admit_builtin(state: &AppState, text: String) -> anyhow::Result<Admission> {
+/// Admits a trusted checkpoint (a built-in) of `arena`'s robot in this process, on the blocking
+/// pool, in turn with the submissions.
+async fn admit_builtin(
+    state: &AppState,
+    arena: &crate::arenas::Arena,
+    text: String,
+) -> anyhow::Result<Admission> {
     let eval = agents::eval::Evaluation {
-        model: state.model.clone(),
-        config: state.arena.clone(),
+        model: arena.model.clone(),
+        config: arena.config.clone(),
         preset: sim::arena::MYOCHALLENGE,
         kind: sim::serve::ServeKind::P2,
         episodes: state.settings.qualification_episodes,
@@ -228,30 +238,41 @@ pub fn admits(settings: &Settings, r: &agents::eval::EvalReport) -> Result<(), S
 }
 
 /// Registers every checkpoint `settings.builtin_checkpoints` names that is not an agent yet, as a
-/// built-in agent named after its file, qualified like a submission. A checkpoint that does not
-/// load or qualify is skipped with a warning (the committed ones are held to loading by a test);
-/// a name already taken keeps its agent.
-pub(crate) async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Result<()> {
-    let dir = &state.settings.builtin_checkpoints;
+/// built-in agent of `arena`'s robot named after its file ([`crate::arenas::builtin_name`]: the
+/// default robot's from the directory itself, another robot's from its subdirectory of the robot's
+/// name), qualified like a submission. A checkpoint that does not load or qualify is skipped with a
+/// warning (the committed ones are held to loading by a test); a name already taken keeps its agent.
+pub(crate) async fn register_builtin_checkpoints(
+    state: &AppState,
+    arena: &crate::arenas::Arena,
+) -> anyhow::Result<()> {
+    let root = &state.settings.builtin_checkpoints;
+    let robot = arena.name.as_str();
+    let named = |stem: &str| crate::arenas::builtin_name(robot, stem);
     // (name, where it comes from, its text or why it has none)
-    let sources: Vec<(String, String, Result<String, String>)> = if dir.as_os_str().is_empty() {
+    let sources: Vec<(String, String, Result<String, String>)> = if root.as_os_str().is_empty() {
         return Ok(());
-    } else if dir.as_os_str() == EMBEDDED_BUILTINS {
-        agents::builtins::CHECKPOINTS
+    } else if root.as_os_str() == EMBEDDED_BUILTINS {
+        agents::builtins::of_robot(robot)
             .iter()
             .map(|(name, text)| {
-                let from = format!("embedded {name}.json");
-                (name.to_string(), from, Ok(text.to_string()))
+                let from = format!("embedded {robot} {name}.json");
+                (named(name), from, Ok(text.to_string()))
             })
             .collect()
     } else {
-        let mut files: Vec<PathBuf> = match std::fs::read_dir(dir) {
+        let dir = if robot == sim::config::DEFAULT_ROBOT {
+            root.clone()
+        } else {
+            root.join(robot)
+        };
+        let mut files: Vec<PathBuf> = match std::fs::read_dir(&dir) {
             Ok(entries) => entries
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| p.extension().is_some_and(|x| x == "json"))
                 .collect(),
             Err(e) => {
-                tracing::warn!(dir = %dir.display(), "no built-in checkpoints: {e}");
+                tracing::warn!(dir = %dir.display(), "no built-in checkpoints of robot {robot}: {e}");
                 return Ok(());
             }
         };
@@ -259,7 +280,7 @@ pub(crate) async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Re
         files
             .into_iter()
             .filter_map(|path| {
-                let name = path.file_stem()?.to_string_lossy().to_string();
+                let name = named(&path.file_stem()?.to_string_lossy());
                 let text = std::fs::read_to_string(&path).map_err(|e| e.to_string());
                 Some((name, path.display().to_string(), text))
             })
@@ -292,7 +313,7 @@ pub(crate) async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Re
                 continue;
             }
         };
-        let report = match admit_builtin(state, text.clone()).await? {
+        let report = match admit_builtin(state, arena, text.clone()).await? {
             Admission::Qualified { report } => *report,
             other => {
                 tracing::warn!(%path, "built-in checkpoint skipped: {other:?}");
@@ -309,7 +330,8 @@ pub(crate) async fn register_builtin_checkpoints(state: &AppState) -> anyhow::Re
             report.success_rate.value,
             report.effort.value,
         );
-        let id = db::insert_checkpoint_agent(&state.pool, &name, &text, qual, true, None).await?;
+        let id =
+            db::insert_checkpoint_agent(&state.pool, &name, robot, &text, qual, true, None).await?;
         state.publish_agent(id);
         tracing::info!(%name, hit = qual.1, success = qual.2, "built-in checkpoint registered");
     }

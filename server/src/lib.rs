@@ -14,6 +14,7 @@
 
 mod admission;
 pub mod api;
+pub mod arenas;
 pub mod board;
 pub mod db;
 pub mod domain;
@@ -90,11 +91,13 @@ pub async fn work(settings: Settings, on_ready: impl FnOnce(&str)) -> anyhow::Re
     Ok(())
 }
 
-/// The state of a server: database ready, built-in agents registered.
+/// The state of a server: database ready, built-in agents of every robot it plays registered.
 pub async fn start(settings: Settings) -> anyhow::Result<AppState> {
     let state = open_state(settings).await?;
-    db::register_builtins(&state.pool).await?;
-    register_builtin_checkpoints(&state).await?;
+    for arena in state.arenas.iter() {
+        db::register_builtins(&state.pool, &arena.name).await?;
+        register_builtin_checkpoints(&state, arena).await?;
+    }
     Ok(state)
 }
 

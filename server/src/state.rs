@@ -19,16 +19,15 @@ pub struct AppState {
     pub worker: Arc<String>,
     /// The database.
     pub pool: Pool,
-    /// The robot model both sides play with.
-    pub model: Arc<sim::model::Model>,
-    /// Arena constants.
-    pub arena: sim::config::ArenaConfig,
+    /// The robots this process plays, each in its arena.
+    pub arenas: crate::arenas::Arenas,
     /// Settings.
     pub settings: Arc<Settings>,
     /// Wakes the workers when a match is queued.
     pub wake: Arc<Notify>,
-    /// The last leaderboard computed, with the number of finished matches it was computed from.
-    pub board: Arc<tokio::sync::Mutex<Option<CachedBoard>>>,
+    /// The last leaderboard computed of each robot, with the number of finished matches it was
+    /// computed from.
+    pub board: Arc<tokio::sync::Mutex<std::collections::HashMap<String, CachedBoard>>>,
     /// What each submitter token spent of its budgets recently (when, how much).
     pub rate: Arc<std::sync::Mutex<RateLog>>,
     /// One admission (a checkpoint validated and qualified) at a time: submissions wait their
@@ -129,18 +128,17 @@ pub async fn open_state(settings: Settings) -> anyhow::Result<AppState> {
             "re-queued running matches whose worker's lease ran out"
         );
     }
-    let model = Arc::new(sim::config::default_model());
+    let arenas = crate::arenas::Arenas::load(&crate::settings::data_dir())?;
     let workers = settings.workers.max(1);
     let worker = Arc::new(settings.worker());
     let players = Arc::new(crate::players::PlayerCache::new(settings.player_cache));
     Ok(AppState {
         worker,
         pool,
-        model,
-        arena: sim::config::ArenaConfig::default(),
+        arenas,
         settings: Arc::new(settings),
         wake: Arc::new(Notify::new()),
-        board: Arc::new(tokio::sync::Mutex::new(None)),
+        board: Arc::new(tokio::sync::Mutex::new(std::collections::HashMap::new())),
         rate: Arc::new(std::sync::Mutex::new(RateLog::new())),
         admit: Arc::new(tokio::sync::Semaphore::new(1)),
         admit_waiting: Arc::new(std::sync::atomic::AtomicUsize::new(0)),

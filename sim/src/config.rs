@@ -11,6 +11,22 @@ pub const MYOCHALLENGE_ARENA_TOML: &str = include_str!("../../config/myochalleng
 /// The shipped robot, `config/models/upper_body.xml`.
 pub const DEFAULT_MODEL_XML: &str = include_str!("../../config/models/upper_body.xml");
 
+/// The name that `--model`, checkpoints and the server give the shipped robot.
+pub const DEFAULT_ROBOT: &str = "default";
+/// The shipped robot's own name in its MJCF (`<mujoco model>`).
+const DEFAULT_MJCF_NAME: &str = "muscle_rally_upper_body";
+
+/// The name a robot goes by in checkpoints and in the server: [`DEFAULT_ROBOT`] for the shipped
+/// robot, its MJCF name (`<mujoco model>`) for any other (`myochallenge` for MyoSuite's, as
+/// `rally model import myosuite` writes it).
+pub fn robot_name(model: &crate::model::Model) -> &str {
+    if model.name == DEFAULT_MJCF_NAME {
+        DEFAULT_ROBOT
+    } else {
+        &model.name
+    }
+}
+
 /// The shipped robot, parsed: the one place [`DEFAULT_MODEL_XML`] is read (it is compiled in and
 /// the tests load it, so it always parses).
 pub fn default_model() -> crate::model::Model {

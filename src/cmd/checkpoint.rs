@@ -43,8 +43,9 @@ enum CheckpointCommand {
         #[arg(long, default_value = "template")]
         name: String,
     },
-    /// Print a built-in checkpoint (kmac, kmac-rally, muscle-ppo, muscle-pd, dynsyn) as JSON: a trained
-    /// policy of the built-in body to start from or to submit under another name.
+    /// Print a built-in checkpoint (kmac, kmac-rally, muscle-ppo, muscle-pd, dynsyn; with `--model
+    /// myochallenge`, MyoSuite's robot's: kmac) as JSON: a trained policy to start from or to
+    /// submit under another name.
     Builtin {
         /// Its name.
         name: String,
@@ -98,9 +99,10 @@ enum CheckpointCommand {
 
 /// Runs `rally checkpoint`.
 pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
-    let model = args.model.load()?.model;
+    let body = args.model.load()?;
+    let model = body.model.clone();
     match &args.command {
-        CheckpointCommand::Builtin { name } => builtin(name),
+        CheckpointCommand::Builtin { name } => builtin(sim::config::robot_name(&model), name),
         CheckpointCommand::Template {
             controller,
             hidden,
@@ -120,16 +122,16 @@ pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
             seed,
             cpu_s,
             memory_mb,
-        } => admit(model, *episodes, *seed, *cpu_s, *memory_mb),
+        } => admit(body, *episodes, *seed, *cpu_s, *memory_mb),
     }
 }
 
-/// `rally checkpoint builtin NAME`: prints the embedded checkpoint.
-fn builtin(name: &str) -> Result<(), CliError> {
-    let text = agents::builtins::checkpoint(name).ok_or_else(|| {
+/// `rally checkpoint builtin NAME`: prints robot `robot`'s embedded checkpoint.
+fn builtin(robot: &str, name: &str) -> Result<(), CliError> {
+    let text = agents::builtins::checkpoint_of(robot, name).ok_or_else(|| {
         CliError::Usage(format!(
-            "no built-in checkpoint '{name}'; there are: {}",
-            agents::builtins::names().join(", ")
+            "no built-in checkpoint '{name}' of the {robot} robot; there are: {}",
+            agents::builtins::names_of(robot).join(", ")
         ))
     })?;
     println!("{}", text.trim_end());
@@ -209,7 +211,7 @@ const MAX_MESSAGE: usize = 2048;
 /// `rally checkpoint admit`: limits itself, reads the checkpoint from standard input, prints the
 /// admission's outcome.
 fn admit(
-    model: std::sync::Arc<Model>,
+    body: super::Body,
     episodes: usize,
     seed: u64,
     cpu_s: f64,
@@ -232,8 +234,8 @@ fn admit(
         std::process::exit(server::ADMIT_SETUP_FAILED);
     }
     let eval = agents::eval::Evaluation {
-        model,
-        config: sim::config::ArenaConfig::default(),
+        model: body.model,
+        config: body.config,
         preset: sim::arena::MYOCHALLENGE,
         kind: sim::serve::ServeKind::P2,
         episodes,

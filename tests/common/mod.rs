@@ -122,6 +122,9 @@ pub fn start_serve(dir: &Path, workers: usize, continuous: bool, extra: &str) ->
         .current_dir(dir)
         .args(["serve", "--config"])
         .arg(&config)
+        // The robots it plays are those imported under the test's directory (none: the default
+        // robot alone), whatever the machine's own data directory holds.
+        .env("RALLY_DATA_DIR", dir)
         .env("RALLY_ADMIN_TOKEN", TOKEN)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
@@ -148,6 +151,7 @@ pub fn start_worker(dir: &Path, name: &str) -> Server {
         .arg(dir.join("server.toml"))
         .args(["--db", &db(dir)])
         .args(["--name", name])
+        .env("RALLY_DATA_DIR", dir)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())

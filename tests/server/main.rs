@@ -24,6 +24,7 @@ mod common;
 use common::*;
 
 mod admission;
+mod arenas;
 mod bad_input;
 mod cancel;
 mod contests;

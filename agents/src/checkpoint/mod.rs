@@ -58,6 +58,10 @@ pub struct Checkpoint {
     pub version: u32,
     /// Display name.
     pub name: String,
+    /// The robot it plays ([`sim::config::robot_name`]: `default`, `myochallenge`, or an MJCF
+    /// model's name); files without it play the default robot.
+    #[serde(default = "default_robot")]
+    pub model: String,
     /// How actions become muscle controls.
     pub controller: ControllerSpec,
     /// What the policy sees.
@@ -128,6 +132,10 @@ pub struct Training {
     /// checkpoint plays with the noise it was trained with.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_scale: Option<f64>,
+}
+
+fn default_robot() -> String {
+    sim::config::DEFAULT_ROBOT.into()
 }
 
 pub(crate) fn single_env() -> String {
@@ -218,6 +226,7 @@ impl Checkpoint {
     /// Checks every field against `model`.
     pub fn validate(&self, model: &Model) -> Result<(), CheckpointError> {
         self.validate_header()?;
+        self.validate_robot(model)?;
         let space = ActionSpace::new(model);
         self.validate_controller(&space)?;
         let obs = self.validate_observation(&space)?;
@@ -335,6 +344,23 @@ impl Checkpoint {
         Ok(obs)
     }
 
+    /// The robot it names is `model`: a checkpoint of one robot is refused by another's arena
+    /// before anything else is compared, with both names.
+    fn validate_robot(&self, model: &Model) -> Result<(), CheckpointError> {
+        let here = sim::config::robot_name(model);
+        if self.model != here {
+            return Err(bad(
+                "model",
+                format!(
+                    "'{}': this checkpoint plays the {} robot, not {here} (play it with \
+                     --model {}, or train one with --model {here})",
+                    self.model, self.model, self.model
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// The network (an MLP or an ONNX model, which must run on a zero observation) for `obs`
     /// inputs; returns its output width.
     fn network_width(&self, obs: usize) -> Result<usize, CheckpointError> {
@@ -450,6 +476,7 @@ impl Checkpoint {
             format: FORMAT.into(),
             version: VERSION,
             name: name.into(),
+            model: sim::config::robot_name(model).into(),
             controller,
             observation: ObservationSpec {
                 blocks,

@@ -2,13 +2,21 @@
 
 use super::*;
 
-/// `GET /agents`: the agents that play; `?all=1` the retired ones too.
+/// `GET /agents`: the agents that play; `?all=1` the retired ones too; `?model=` one robot's.
 pub(super) async fn list_agents(
     State(s): State<AppState>,
     Typed(q): Typed<wire::AgentsQuery>,
 ) -> ApiResult<Json<wire::AgentList>> {
     let all = q.all;
-    let mut agents = db::agents(&s.pool).await?;
+    let mut agents = match &q.model {
+        Some(robot) => {
+            s.arenas
+                .require(robot)
+                .map_err(|e| ApiError::bad("model", e))?;
+            db::agents_of(&s.pool, robot).await?
+        }
+        None => db::agents(&s.pool).await?,
+    };
     agents.retain(|a| all || a.retired_at.is_none());
     Ok(Json(wire::AgentList { agents }))
 }
@@ -172,6 +180,14 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     if s.admit_waiting.load(std::sync::atomic::Ordering::SeqCst) >= s.settings.admission_queue {
         return Err(busy());
     }
+    // The robot it plays (`model`; none: the default robot's), one this server plays. A text that
+    // is no checkpoint's JSON gets its admission's precise message.
+    let robot = db::model_of(body.checkpoint.get())
+        .unwrap_or_else(|| sim::config::DEFAULT_ROBOT.to_string());
+    s.arenas.require(&robot).map_err(|e| ApiError {
+        field: Some("checkpoint.model".into()),
+        ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "unknown_robot", e)
+    })?;
     charge(&s, caller, &[(Budget::Agents, 1)])?;
     let text = body.checkpoint.get().to_string();
     drop(body.checkpoint);
@@ -181,7 +197,7 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     };
     use crate::admission::Refused;
     let mut report =
-        match crate::admission::admit_submission(&s, text.clone()).await? {
+        match crate::admission::admit_submission(&s, &robot, text.clone()).await? {
             Err(Refused::Busy) => return Err(busy()),
             Ok(report) => report,
             Err(Refused::Invalid(e)) => return Err(refused("invalid_checkpoint", e)),
@@ -226,6 +242,7 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
     let id = match db::insert_checkpoint_agent(
         &s.pool,
         &body.name,
+        &robot,
         &text,
         qual,
         false,

@@ -7,8 +7,8 @@ use axum::response::{IntoResponse, Response};
 use axum::Json;
 
 use super::{
-    agent_or_404, charge, check_token, limit_of, may_cancel, parse_id, seed_or_clock, submitter,
-    ApiError, ApiResult, Typed,
+    agent_or_404, charge, check_token, limit_of, may_cancel, parse_id, same_robot, seed_or_clock,
+    submitter, ApiError, ApiResult, Typed,
 };
 use crate::state::{AppState, Budget};
 use crate::tournament;
@@ -61,6 +61,9 @@ pub(super) async fn create_tournament(
             "agents",
             format!("agent '{}' is listed twice", dup.name),
         ));
+    }
+    if let Some(odd) = agents.iter().find(|a| a.model != agents[0].model) {
+        return Err(same_robot(&agents[0], odd, "agents").unwrap_err());
     }
     let rallies = pairs.len() as u64 * u64::from(t.rallies_per_match);
     charge(
@@ -227,6 +230,7 @@ pub(super) async fn create_sprt(
     if a.id == b.id {
         return Err(ApiError::bad("b", "an SPRT needs two different agents"));
     }
+    same_robot(&a, &b, "b")?;
     // Its first match is queued now; it may play up to max_matches of them.
     let most = u64::from(t.max_matches) * u64::from(t.rallies_per_match);
     charge(&s, caller, &[(Budget::Matches, 1), (Budget::Rallies, most)])?;

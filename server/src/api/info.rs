@@ -7,7 +7,7 @@ use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde_json::{json, Value};
 
-use super::ApiResult;
+use super::{robot_of, ApiResult, Typed};
 use crate::db;
 use crate::ratings;
 use crate::state::AppState;
@@ -22,25 +22,31 @@ pub(super) async fn healthz(State(s): State<AppState>) -> ApiResult<Json<wire::H
             min_hit_rate: s.settings.qualification_min_hit_rate,
             max_dropped: s.settings.qualification_max_dropped,
         }),
+        models: s.arenas.iter().map(|a| a.name.clone()).collect(),
     }))
 }
 
-/// `GET /arena`: the arena's geometry as the simulator has it (table, net, floor, hitting planes, serve
-/// box, ball, the default robot's paddle), so that pages draw what the simulator simulates.
-pub(super) async fn arena(State(s): State<AppState>) -> Json<Value> {
+/// `GET /arena?model=`: the arena's geometry as the simulator has it (table, net, floor, hitting
+/// planes, serve box, ball, the robot's paddle), so that pages draw what the simulator simulates.
+pub(super) async fn arena(
+    State(s): State<AppState>,
+    Typed(q): Typed<wire::ModelQuery>,
+) -> super::ApiResult<Json<Value>> {
     use sim::arena as a;
-    let paddle = s
+    let robot = robot_of(&s, &q)?;
+    let paddle = robot
         .model
-        .body("paddle")
-        .and_then(|b| sim::geometry::PaddleShape::from_model(&s.model, b).ok())
+        .body(&robot.config.grip.paddle_body)
+        .and_then(|b| sim::geometry::PaddleShape::from_model(&robot.model, b).ok())
         .unwrap_or_else(sim::geometry::PaddleShape::standard);
     let cyl = |c: &sim::geometry::Cylinder| {
         let axis = ["x", "y", "z"][c.axis];
         json!({"center": [c.center.x, c.center.y, c.center.z], "axis": axis,
                "radius": c.radius, "half_length": c.half_length})
     };
-    Json(json!({
+    Ok(Json(json!({
         "sim_version": sim::SIM_VERSION,
+        "model": robot.name,
         "table": {"x": [-a::TABLE_HALF_LENGTH, a::TABLE_HALF_LENGTH], "y": [a::TABLE_Y_MIN, a::TABLE_Y_MAX],
                   "center_y": a::TABLE_CENTER_Y, "top_z": a::TABLE_TOP_Z},
         "net": {"center": a::NET_CENTER, "half_size": a::NET_HALF_SIZE, "top_z": a::NET_TOP_Z},
@@ -49,14 +55,18 @@ pub(super) async fn arena(State(s): State<AppState>) -> Json<Value> {
         "serve_box": {"z": [a::SERVE_BOX_Z.0, a::SERVE_BOX_Z.1], "half_width": a::SERVE_BOX_HALF_WIDTH},
         "ball_radius": a::BALL_RADIUS,
         "paddle": {"blade": cyl(&paddle.blade), "handle": cyl(&paddle.handle)},
-    }))
+    })))
 }
 
-/// `GET /model`: what a page needs to draw the robots — bodies (name, parent; `paddle` is drawn from
+/// `GET /model?model=`: what a page needs to draw the robots — bodies (name, parent; `paddle` is drawn from
 /// the frames' paddle pose instead), every geom in its body's frame (kind, size, pos, quat w x y z),
 /// the sites and every muscle's path through them (the actuator index that colours it).
-pub(super) async fn robot_model(State(s): State<AppState>) -> Json<Value> {
-    let m = &s.model;
+pub(super) async fn robot_model(
+    State(s): State<AppState>,
+    Typed(q): Typed<wire::ModelQuery>,
+) -> ApiResult<Json<Value>> {
+    let robot = robot_of(&s, &q)?;
+    let m = &robot.model;
     let q = |q: &nalgebra::UnitQuaternion<f64>| json!([q.w, q.i, q.j, q.k]);
     let v = |p: &nalgebra::Vector3<f64>| json!([p.x, p.y, p.z]);
     let kind = |k: sim::model::GeomKind| match k {
@@ -76,21 +86,27 @@ pub(super) async fn robot_model(State(s): State<AppState>) -> Json<Value> {
             _ => None,
         })
         .collect();
-    Json(json!({
+    Ok(Json(json!({
         "name": m.name,
-        "paddle_body": m.body("paddle"),
+        "robot": robot.name,
+        "paddle_body": m.body(&robot.config.grip.paddle_body),
         "bodies": m.bodies.iter().map(|b| json!({"name": b.name, "parent": b.parent})).collect::<Vec<_>>(),
         "geoms": m.geoms.iter().map(|g| json!({"body": g.body, "name": g.name, "kind": kind(g.kind),
             "size": g.size, "pos": v(&g.pos), "quat": q(&g.quat)})).collect::<Vec<_>>(),
         "sites": m.sites.iter().map(|st| json!({"body": st.body, "pos": v(&st.pos)})).collect::<Vec<_>>(),
         "muscles": muscles,
-    }))
+    })))
 }
 
+/// `GET /leaderboard?model=`: robot `model`'s leaderboard (none: the default robot's).
 pub(super) async fn leaderboard(
     State(s): State<AppState>,
+    Typed(q): Typed<wire::ModelQuery>,
 ) -> ApiResult<Json<ratings::Leaderboard>> {
-    Ok(Json((*crate::board::current_board(&s).await?).clone()))
+    let robot = robot_of(&s, &q)?;
+    Ok(Json(
+        (*crate::board::current_board(&s, &robot.name).await?).clone(),
+    ))
 }
 
 pub(super) async fn metrics(State(s): State<AppState>) -> ApiResult<Response> {

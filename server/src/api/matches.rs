@@ -91,6 +91,7 @@ pub(super) async fn queue_match(
     let seed = seed_or_clock(q.seed)?;
     let a = agent_or_404(&s, &q.a, "a").await?;
     let b = agent_or_404(&s, &q.b, "b").await?;
+    same_robot(&a, &b, "b")?;
     charge(
         &s,
         caller,
@@ -126,8 +127,14 @@ pub(super) async fn list_matches(
         )),
         _ => Ok(id),
     };
+    if let Some(robot) = &q.model {
+        s.arenas
+            .require(robot)
+            .map_err(|e| ApiError::bad("model", e))?;
+    }
     let filter = db::MatchFilter {
         agent: positive(q.agent, "agent")?,
+        model: q.model.clone(),
         status: q.status,
         before: positive(q.before, "before")?,
     };
@@ -259,6 +266,7 @@ pub(super) async fn get_replay(
         };
         let agents = [spec_of(m.agent_a).await?, spec_of(m.agent_b).await?];
         let st = s.clone();
+        let m = m.clone();
         let frames = tokio::task::spawn_blocking(move || {
             crate::scheduler::resimulate_rally(&st, &m, agents, rally as u32)
         })
@@ -268,7 +276,13 @@ pub(super) async fn get_replay(
         let json = serde_json::to_string(&frames).map_err(|e| anyhow::anyhow!("{e}"))?;
         (Ok(json), true)
     };
-    let model = s.model.clone();
+    let robot = m.model.clone();
+    let model = s
+        .arenas
+        .require(&robot)
+        .map_err(|e| ApiError::new(StatusCode::CONFLICT, "not_replayable", e))?
+        .model
+        .clone();
     let frames = tokio::task::spawn_blocking(move || {
         let json = match frames {
             Ok(json) => json,
@@ -280,7 +294,8 @@ pub(super) async fn get_replay(
     .map_err(|e| anyhow::anyhow!("replay poses panicked: {e}"))?
     .map_err(|e| anyhow::anyhow!("stored replay unreadable: {e}"))?;
     let body = format!(
-        "{{\"match\":{id},\"rally\":{rally},\"hz\":{},\"resimulated\":{resimulated},\"frames\":{frames}}}",
+        "{{\"match\":{id},\"model\":{},\"rally\":{rally},\"hz\":{},\"resimulated\":{resimulated},\"frames\":{frames}}}",
+        serde_json::Value::from(robot),
         ::agents::matchrun::REPLAY_HZ
     );
     Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())

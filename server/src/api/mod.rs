@@ -374,6 +374,32 @@ async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiRes
     }
 }
 
+/// 422 naming `field` unless `b` plays `a`'s robot: agents of different robots never meet.
+fn same_robot(a: &db::Agent, b: &db::Agent, field: &'static str) -> ApiResult<()> {
+    if a.model == b.model {
+        return Ok(());
+    }
+    Err(ApiError {
+        field: Some(field.into()),
+        ..ApiError::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "robot_mismatch",
+            format!(
+                "agent {} ('{}') plays the {} robot and agent {} ('{}') the {} robot: agents meet \
+                 only agents of their own robot",
+                a.id, a.name, a.model, b.id, b.name, b.model
+            ),
+        )
+    })
+}
+
+/// The robot a `?model=` names (none: the default robot), one this server plays; 400 otherwise.
+fn robot_of<'s>(s: &'s AppState, q: &wire::ModelQuery) -> ApiResult<&'s crate::arenas::Arena> {
+    s.arenas
+        .require(q.robot())
+        .map_err(|e| ApiError::bad("model", e))
+}
+
 /// A seed given, or one from the clock.
 fn seed_or_clock(seed: Option<u64>) -> ApiResult<u64> {
     if seed.is_some_and(|x| x > i64::MAX as u64) {

@@ -2,22 +2,25 @@
 
 use super::*;
 
-/// Registers the scripted variants as built-in agents (idempotent). An `INSERT … SELECT … WHERE NOT
-/// EXISTS` rather than `ON CONFLICT DO NOTHING`, which takes an id from the sequence even when it
-/// inserts nothing (agent ids skipped three at every restart).
-pub async fn register_builtins(pool: &Pool) -> anyhow::Result<()> {
-    for (name, _) in ::agents::scripted::variants() {
-        sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin) SELECT $1, 'scripted', $2, $3, 1 WHERE NOT EXISTS (SELECT 1 FROM agents WHERE lower(name) = lower($1))")
-            .bind(name)
-            .bind(name)
-            .bind(spec_hash(name))
+/// Registers the scripted variants as built-in agents of robot `model` (idempotent), named as
+/// [`crate::arenas::builtin_name`] says. An `INSERT … SELECT … WHERE NOT EXISTS` rather than
+/// `ON CONFLICT DO NOTHING`, which takes an id from the sequence even when it inserts nothing
+/// (agent ids skipped three at every restart).
+pub async fn register_builtins(pool: &Pool, model: &str) -> anyhow::Result<()> {
+    for (variant, _) in ::agents::scripted::variants() {
+        let name = crate::arenas::builtin_name(model, variant);
+        sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin, model) SELECT $1, 'scripted', $2, $3, 1, $4 WHERE NOT EXISTS (SELECT 1 FROM agents WHERE lower(name) = lower($1))")
+            .bind(&name)
+            .bind(variant)
+            .bind(spec_hash(variant))
+            .bind(model)
             .execute(pool)
             .await?;
     }
     Ok(())
 }
 
-pub(super) const AGENT_COLUMNS: &str = "id, name, kind, spec_hash, builtin, created_at, qual_episodes, hit_rate, success_rate, effort, retired_at";
+pub(super) const AGENT_COLUMNS: &str = "id, name, kind, model, spec_hash, builtin, created_at, qual_episodes, hit_rate, success_rate, effort, retired_at";
 
 /// All agents.
 pub async fn agents(pool: &Pool) -> sqlx::Result<Vec<Agent>> {
@@ -25,6 +28,17 @@ pub async fn agents(pool: &Pool) -> sqlx::Result<Vec<Agent>> {
         .fetch_all(pool)
         .await
         .map(rows)
+}
+
+/// The agents of robot `model`.
+pub async fn agents_of(pool: &Pool, model: &str) -> sqlx::Result<Vec<Agent>> {
+    sqlx::query_as::<_, Row<Agent>>(&format!(
+        "SELECT {AGENT_COLUMNS} FROM agents WHERE model = $1 ORDER BY id"
+    ))
+    .bind(model)
+    .fetch_all(pool)
+    .await
+    .map(rows)
 }
 
 /// One agent.
@@ -94,17 +108,19 @@ pub async fn agent_spec(pool: &Pool, id: i64) -> sqlx::Result<Option<(AgentKind,
         .transpose()
 }
 
-/// Inserts a checkpoint agent (submitted, or built in) with its qualification.
+/// Inserts a checkpoint agent (submitted, or built in) of robot `model` with its qualification.
+#[allow(clippy::too_many_arguments)]
 pub async fn insert_checkpoint_agent(
     pool: &Pool,
     name: &str,
+    model: &str,
     spec: &str,
     qual: (usize, f64, f64, f64),
     builtin: bool,
     submitted_by: Option<i64>,
 ) -> sqlx::Result<i64> {
     sqlx::query_scalar(
-        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, builtin, submitted_by, training_json) VALUES ($1, 'checkpoint', $2, $3, $4, $5, $6, $7, $8, $9, $10) RETURNING id",
+        "INSERT INTO agents (name, kind, spec, spec_hash, qual_episodes, hit_rate, success_rate, effort, builtin, submitted_by, training_json, model) VALUES ($1, 'checkpoint', $2, $3, $4, $5, $6, $7, $8, $9, $10, $11) RETURNING id",
     )
     .bind(name)
     .bind(spec)
@@ -116,8 +132,23 @@ pub async fn insert_checkpoint_agent(
     .bind(builtin as i64)
     .bind(submitted_by)
     .bind(training_of(spec))
+    .bind(model)
     .fetch_one(pool)
     .await
+}
+
+/// The robot a checkpoint's JSON names (`model`; `default` when it names none), read without
+/// keeping the rest; `None` when the text is not a JSON object with a text `model` or none.
+pub fn model_of(spec: &str) -> Option<String> {
+    #[derive(serde::Deserialize)]
+    struct Part {
+        #[serde(default)]
+        model: Option<String>,
+    }
+    serde_json::from_str::<Part>(spec).ok().map(|p| {
+        p.model
+            .unwrap_or_else(|| sim::config::DEFAULT_ROBOT.to_string())
+    })
 }
 
 /// A checkpoint's `training` section as compact JSON text, re-serialised from its fields (`null`
@@ -220,10 +251,10 @@ mod tests {
         let pool = test_store("training_json").await;
         let kmac = ::agents::builtins::checkpoint("kmac").expect("built in");
         let qual = (6, 0.5, 0.1, 0.1);
-        let id = insert_checkpoint_agent(&pool, "kmac", kmac, qual, true, None)
+        let id = insert_checkpoint_agent(&pool, "kmac", "default", kmac, qual, true, None)
             .await
             .unwrap();
-        let none = insert_checkpoint_agent(&pool, "bare", "{}", qual, false, None)
+        let none = insert_checkpoint_agent(&pool, "bare", "default", "{}", qual, false, None)
             .await
             .unwrap();
         let training = agent_training(&pool, id)
@@ -247,7 +278,7 @@ mod tests {
             " ".repeat(1 << 20),
             &section[1..]
         );
-        let pad = insert_checkpoint_agent(&pool, "padded", &padded, qual, false, None)
+        let pad = insert_checkpoint_agent(&pool, "padded", "default", &padded, qual, false, None)
             .await
             .unwrap();
         let (stored,): (String,) = sqlx::query_as("SELECT training_json FROM agents WHERE id = $1")
@@ -273,18 +304,18 @@ mod tests {
         let pool = test_store("agent_names").await;
         // Three starts register the scripted agents once, and take no id for the ones that exist.
         for _ in 0..3 {
-            register_builtins(&pool).await.unwrap();
+            register_builtins(&pool, "default").await.unwrap();
         }
         let n = ::agents::scripted::variants().len() as i64;
         let ids: Vec<i64> = agents(&pool).await.unwrap().iter().map(|a| a.id).collect();
         assert_eq!(ids, (1..=n).collect::<Vec<_>>());
         let qual = (6, 0.5, 0.1, 0.1);
-        let id = insert_checkpoint_agent(&pool, "mine", "{}", qual, false, None)
+        let id = insert_checkpoint_agent(&pool, "mine", "default", "{}", qual, false, None)
             .await
             .unwrap();
         assert_eq!(id, n + 1);
         // The store itself refuses a name that differs only in case, whoever checks first.
-        let err = insert_checkpoint_agent(&pool, "MINE", "{}", qual, false, None)
+        let err = insert_checkpoint_agent(&pool, "MINE", "default", "{}", qual, false, None)
             .await
             .unwrap_err();
         assert!(
@@ -299,10 +330,10 @@ mod tests {
     #[tokio::test]
     async fn a_store_of_the_old_spec_hashes_is_rehashed_and_its_matches_still_match() {
         let pool = test_store("rehash").await;
-        register_builtins(&pool).await.unwrap();
+        register_builtins(&pool, "default").await.unwrap();
         let spec = r#"{"a": "checkpoint"}"#;
         let qual = (6, 0.5, 0.1, 0.1);
-        let id = insert_checkpoint_agent(&pool, "old", spec, qual, false, None)
+        let id = insert_checkpoint_agent(&pool, "old", "default", spec, qual, false, None)
             .await
             .unwrap();
         // As a store written with the 32-digit FNV digests has them: the agent, a match queued

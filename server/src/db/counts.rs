@@ -32,35 +32,40 @@ pub async fn contest_tallies(pool: &Pool) -> sqlx::Result<Vec<(String, i64)>> {
 }
 
 /// (agents plus retired agents, finished matches): each only grows, with every agent added or
-/// retired and every match finished, so the leaderboard is recomputed when either changed.
-pub async fn board_key(pool: &Pool) -> sqlx::Result<(i64, i64)> {
+/// retired and every match finished, so robot `model`'s leaderboard is recomputed when either of
+/// its own changed.
+pub async fn board_key(pool: &Pool, model: &str) -> sqlx::Result<(i64, i64)> {
     sqlx::query_as(
-        "SELECT (SELECT COUNT(*) + COUNT(retired_at) FROM agents), (SELECT COUNT(*) FROM matches WHERE status = 'done')",
+        "SELECT (SELECT COUNT(*) + COUNT(retired_at) FROM agents WHERE model = $1), (SELECT COUNT(*) FROM matches WHERE status = 'done' AND model = $1)",
     )
+    .bind(model)
     .fetch_one(pool)
     .await
 }
 
 /// Per agent, its cooperative matches (against itself) neither cancelled nor failed, as (agent id,
-/// count); agents without any are absent.
-pub async fn self_play_counts(pool: &Pool) -> sqlx::Result<Vec<(i64, i64)>> {
+/// count), of robot `model`; agents without any are absent.
+pub async fn self_play_counts(pool: &Pool, model: &str) -> sqlx::Result<Vec<(i64, i64)>> {
     sqlx::query_as(
-        "SELECT agent_a, COUNT(*) FROM matches WHERE agent_a = agent_b AND status <> 'cancelled' AND status <> 'failed' GROUP BY agent_a",
+        "SELECT agent_a, COUNT(*) FROM matches WHERE agent_a = agent_b AND model = $1 AND status <> 'cancelled' AND status <> 'failed' GROUP BY agent_a",
     )
+    .bind(model)
     .fetch_all(pool)
     .await
 }
 
-/// The (A, B) agent ids of every running match.
-pub async fn running_pairs(pool: &Pool) -> sqlx::Result<Vec<(i64, i64)>> {
-    sqlx::query_as("SELECT agent_a, agent_b FROM matches WHERE status = 'running'")
+/// The (A, B) agent ids of every running match of robot `model`.
+pub async fn running_pairs(pool: &Pool, model: &str) -> sqlx::Result<Vec<(i64, i64)>> {
+    sqlx::query_as("SELECT agent_a, agent_b FROM matches WHERE status = 'running' AND model = $1")
+        .bind(model)
         .fetch_all(pool)
         .await
 }
 
-/// Matches ever queued.
-pub async fn match_count(pool: &Pool) -> sqlx::Result<i64> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM matches")
+/// Matches ever queued of robot `model`.
+pub async fn match_count(pool: &Pool, model: &str) -> sqlx::Result<i64> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM matches WHERE model = $1")
+        .bind(model)
         .fetch_one(pool)
         .await
 }

@@ -7,7 +7,7 @@ use super::*;
 /// (a constant of ours, digits and dots only).
 pub(super) fn match_columns() -> String {
     format!(
-        "id, agent_a, agent_b, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, replay_bytes, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by, worker, attempts",
+        "id, agent_a, agent_b, model, rallies, seed, preset, sim_version, sim_version <> '{}' AS outdated, spec_hash_a, spec_hash_b, keep_replay, replay_bytes, status, created_at, started_at, finished_at, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, drift_slope, error, tournament_id, sprt_id, created_by, worker, attempts",
         sim::SIM_VERSION
     )
 }
@@ -19,6 +19,7 @@ pub(crate) fn example_match(id: i64, agent_a: i64, agent_b: i64) -> Match {
         id,
         agent_a,
         agent_b,
+        model: "default".into(),
         rallies: 10,
         seed: id,
         preset: "myochallenge".into(),
@@ -59,7 +60,8 @@ pub struct Origin {
     pub created_by: Option<i64>,
 }
 
-/// Queues a match (on the pool or inside a transaction).
+/// Queues a match (on the pool or inside a transaction) between two agents of one robot (the API
+/// refuses others, naming the side; here they are an error that stores nothing).
 pub async fn queue_match<'c, E: sqlx::AnyExecutor<'c>>(
     db: E,
     a: &Agent,
@@ -69,8 +71,14 @@ pub async fn queue_match<'c, E: sqlx::AnyExecutor<'c>>(
     keep_replay: bool,
     origin: Origin,
 ) -> sqlx::Result<i64> {
+    if a.model != b.model {
+        return Err(sqlx::Error::Protocol(format!(
+            "agents {} and {} play different robots ({} and {})",
+            a.id, b.id, a.model, b.model
+        )));
+    }
     sqlx::query_scalar(
-        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id, created_by) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, 'queued', $10, $11, $12) RETURNING id",
+        "INSERT INTO matches (agent_a, agent_b, rallies, seed, preset, sim_version, spec_hash_a, spec_hash_b, keep_replay, status, tournament_id, sprt_id, created_by, model) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, 'queued', $10, $11, $12, $13) RETURNING id",
     )
     .bind(a.id)
     .bind(b.id)
@@ -84,6 +92,7 @@ pub async fn queue_match<'c, E: sqlx::AnyExecutor<'c>>(
     .bind(origin.tournament)
     .bind(origin.sprt)
     .bind(origin.created_by)
+    .bind(&a.model)
     .fetch_one(db)
     .await
 }
@@ -101,10 +110,12 @@ pub async fn match_row(pool: &Pool, id: i64) -> sqlx::Result<Option<Match>> {
 }
 
 /// Which matches to list.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct MatchFilter {
     /// Only those this agent played.
     pub agent: Option<i64>,
+    /// Only those of this robot.
+    pub model: Option<String>,
     /// Only those in this status.
     pub status: Option<MatchStatus>,
     /// Only those with a smaller id (the next page after the last id seen).
@@ -114,13 +125,14 @@ pub struct MatchFilter {
 /// Matches, newest first, filtered.
 pub async fn matches(pool: &Pool, filter: MatchFilter, limit: i64) -> sqlx::Result<Vec<Match>> {
     sqlx::query_as::<_, Row<Match>>(&format!(
-        "SELECT {cols} FROM matches WHERE ($1 IS NULL OR agent_a = $1 OR agent_b = $1) AND ($2 IS NULL OR status = $2) AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4",
+        "SELECT {cols} FROM matches WHERE ($1 IS NULL OR agent_a = $1 OR agent_b = $1) AND ($2 IS NULL OR status = $2) AND ($3 IS NULL OR id < $3) AND ($5 IS NULL OR model = $5) ORDER BY id DESC LIMIT $4",
         cols = match_columns()
     ))
     .bind(filter.agent)
     .bind(filter.status.map(MatchStatus::as_str))
     .bind(filter.before)
     .bind(limit)
+    .bind(filter.model)
     .fetch_all(pool)
     .await
     .map(rows)
@@ -455,7 +467,7 @@ mod tests {
     #[tokio::test]
     async fn a_match_of_another_simulator_version_says_it_is_outdated() {
         let pool = test_store("outdated").await;
-        register_builtins(&pool).await.unwrap();
+        register_builtins(&pool, "default").await.unwrap();
         let all = agents(&pool).await.unwrap();
         let (a, b) = (&all[0], &all[1]);
         let now = queue_match(&pool, a, b, 2, 1, true, Origin::default())

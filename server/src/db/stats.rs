@@ -16,33 +16,39 @@ impl From<&Agent> for crate::ratings::Entrant {
     }
 }
 
-/// Every finished match's outcome.
-pub async fn outcomes(pool: &Pool) -> sqlx::Result<Vec<Outcome>> {
+/// Every finished match's outcome of robot `model`.
+pub async fn outcomes(pool: &Pool, model: &str) -> sqlx::Result<Vec<Outcome>> {
     sqlx::query_as(
-        "SELECT agent_a, agent_b, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, rallies FROM matches WHERE status = 'done' ORDER BY id",
+        "SELECT agent_a, agent_b, points_a, points_b, mean_rally_length, max_rally_length, in_box_fraction, energy_distance, rallies FROM matches WHERE status = 'done' AND model = $1 ORDER BY id",
     )
+    .bind(model)
     .fetch_all(pool)
     .await
 }
 
-/// The latest Glicko-2 rating and deviation of every agent that has one.
-pub async fn latest_glicko(pool: &Pool) -> sqlx::Result<Vec<(i64, f64, f64)>> {
+/// The latest Glicko-2 rating and deviation of every agent of robot `model` that has one.
+pub async fn latest_glicko(pool: &Pool, model: &str) -> sqlx::Result<Vec<(i64, f64, f64)>> {
     sqlx::query_as(
-        "SELECT agent_id, rating, deviation FROM rating_history h WHERE seq = (SELECT MAX(seq) FROM rating_history WHERE agent_id = h.agent_id)",
+        "SELECT h.agent_id, h.rating, h.deviation FROM rating_history h JOIN agents a ON a.id = h.agent_id WHERE a.model = $1 AND h.seq = (SELECT MAX(seq) FROM rating_history WHERE agent_id = h.agent_id)",
     )
+    .bind(model)
     .fetch_all(pool)
     .await
 }
 
 /// Per agent: mean over its finished matches of its own side's in-box fraction and serve → return
-/// energy distance (`match_drift`).
-pub async fn agent_drift(pool: &Pool) -> sqlx::Result<Vec<(i64, Option<f64>, Option<f64>)>> {
+/// energy distance (`match_drift`); the agents of robot `model`.
+pub async fn agent_drift(
+    pool: &Pool,
+    model: &str,
+) -> sqlx::Result<Vec<(i64, Option<f64>, Option<f64>)>> {
     // As `agent_drift_summary` computes them for the agent's page: the in-box fraction pooled over
     // crossings (a match without any weighs nothing), the energy distance averaged where it exists.
     sqlx::query_as(
-        "SELECT agent_id, SUM(in_box_fraction * crossings) / NULLIF(CAST(SUM(crossings) AS DOUBLE PRECISION), 0), \
-         AVG(energy_distance) FROM match_drift GROUP BY agent_id",
+        "SELECT d.agent_id, SUM(d.in_box_fraction * d.crossings) / NULLIF(CAST(SUM(d.crossings) AS DOUBLE PRECISION), 0), \
+         AVG(d.energy_distance) FROM match_drift d JOIN agents a ON a.id = d.agent_id WHERE a.model = $1 GROUP BY d.agent_id",
     )
+        .bind(model)
         .fetch_all(pool)
         .await
 }

@@ -74,12 +74,17 @@ pub async fn release(pool: &Pool, lease: &Lease) -> sqlx::Result<bool> {
 
 /// Claims the oldest queued match for `worker` with a lease of `lease_ms` (queued → running) in one
 /// statement (SQLite's single `UPDATE … RETURNING`; on PostgreSQL with `FOR UPDATE SKIP LOCKED`), so
-/// two workers never take the same match; expired leases are queued again first.
+/// two workers never take the same match; expired leases are queued again first. Only matches of
+/// the robots in `models` (those this worker has loaded): another worker plays the rest.
 pub async fn claim(
     pool: &Pool,
     worker: &str,
     lease_ms: i64,
+    models: &[&str],
 ) -> sqlx::Result<Option<(super::Match, Lease)>> {
+    if models.is_empty() {
+        return Ok(None);
+    }
     let now = now_ms();
     requeue_expired(pool, now).await?;
     // The oldest queued match, taken in one statement. On PostgreSQL, `FOR UPDATE SKIP LOCKED` lets
@@ -89,17 +94,24 @@ pub async fn claim(
         super::Engine::Postgres => " FOR UPDATE SKIP LOCKED",
         super::Engine::Sqlite => "",
     };
-    let row: Option<(i64, i64)> = sqlx::query_as(&format!(
+    let robots = (0..models.len())
+        .map(|k| format!("${}", k + 4))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let sql = format!(
         "UPDATE matches SET status = 'running', started_at = $3, worker = $1, \
          lease_expires_ms = $2, attempts = attempts + 1 \
-         WHERE id = (SELECT id FROM matches WHERE status = 'queued' ORDER BY id LIMIT 1{skip_locked}) \
+         WHERE id = (SELECT id FROM matches WHERE status = 'queued' AND model IN ({robots}) ORDER BY id LIMIT 1{skip_locked}) \
          AND status = 'queued' RETURNING id, attempts",
-    ))
-    .bind(worker)
-    .bind(now + lease_ms)
-    .bind(crate::db::now_text())
-    .fetch_optional(pool)
-    .await?;
+    );
+    let mut query = sqlx::query_as(&sql)
+        .bind(worker)
+        .bind(now + lease_ms)
+        .bind(crate::db::now_text());
+    for m in models {
+        query = query.bind(*m);
+    }
+    let row: Option<(i64, i64)> = query.fetch_optional(pool).await?;
     let Some((id, attempt)) = row else {
         return Ok(None);
     };
@@ -258,7 +270,7 @@ mod tests {
     /// A fresh store with the built-ins and one queued 1-rally match of the first two, seed `seed`.
     async fn queued_match(tag: &str, seed: u64) -> (Pool, Vec<db::Agent>, i64) {
         let pool = db::test_store(tag).await;
-        db::register_builtins(&pool).await.unwrap();
+        db::register_builtins(&pool, "default").await.unwrap();
         let all = db::agents(&pool).await.unwrap();
         let id = db::queue_match(
             &pool,
@@ -300,17 +312,26 @@ mod tests {
             "{taken}"
         );
 
-        let (m, stale) = claim(&pool, "old", 60_000).await.unwrap().unwrap();
+        let (m, stale) = claim(&pool, "old", 60_000, &["default"])
+            .await
+            .unwrap()
+            .unwrap();
         assert_eq!((m.id, stale.attempt, m.status.as_str()), (id, 1, "running"));
         assert!(
-            claim(&pool, "new", 60_000).await.unwrap().is_none(),
+            claim(&pool, "new", 60_000, &["default"])
+                .await
+                .unwrap()
+                .is_none(),
             "claimed once"
         );
         // A heartbeat renews the lease; a lease in the past is queued again at the next claim.
         assert_eq!(heartbeat(&pool, "old", 60_000).await.unwrap(), 1);
         assert_eq!(requeue_expired(&pool, now_ms()).await.unwrap(), 0);
         assert_eq!(requeue_expired(&pool, now_ms() + 120_000).await.unwrap(), 1);
-        let (_, current) = claim(&pool, "new", 60_000).await.unwrap().unwrap();
+        let (_, current) = claim(&pool, "new", 60_000, &["default"])
+            .await
+            .unwrap()
+            .unwrap();
         assert_eq!(current.attempt, 2);
 
         let (record, replay) = one_rally(1);
@@ -360,7 +381,10 @@ mod tests {
     async fn a_match_without_crossings_stores_no_in_box_share() {
         let (pool, all, id) = queued_match("no_crossings", 3).await;
         register(&pool, "w", "h", 1, 1, 60_000).await.unwrap();
-        let (_, lease) = claim(&pool, "w", 60_000).await.unwrap().unwrap();
+        let (_, lease) = claim(&pool, "w", 60_000, &["default"])
+            .await
+            .unwrap()
+            .unwrap();
         let (mut record, replay) = one_rally(3);
         // As a match whose balls never crossed a hitting plane has it.
         record.drift.crossings = 0;

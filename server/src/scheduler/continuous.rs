@@ -1,15 +1,27 @@
-//! Continuous mode: which match to queue when the queue is empty: the agent whose rating is least
-//! certain, against the opponent it met least — an established one first if it is provisional.
+//! Continuous mode: which match to queue, for each robot whose queue is empty: the agent whose
+//! rating is least certain, against the opponent it met least — an established one first if it is
+//! provisional. Each robot's agents meet only each other.
 
 use crate::db;
 use crate::state::AppState;
 
-/// Queues one continuous-mode match if the queue is empty; true if it did.
+/// Queues one continuous-mode match for each robot this server plays whose queue is empty; true if
+/// it queued any.
 pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
+    let mut queued = false;
+    for arena in state.arenas.iter() {
+        queued |= queue_continuous_of(state, &arena.name).await?;
+    }
+    Ok(queued)
+}
+
+/// Queues one continuous-mode match of robot `model` if none of its matches is queued.
+async fn queue_continuous_of(state: &AppState, model: &str) -> anyhow::Result<bool> {
     let queued = db::matches(
         &state.pool,
         db::MatchFilter {
             status: Some(db::MatchStatus::Queued),
+            model: Some(model.to_string()),
             ..db::MatchFilter::default()
         },
         1,
@@ -18,20 +30,20 @@ pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     if !queued.is_empty() {
         return Ok(false);
     }
-    let mut agents = db::agents(&state.pool).await?;
+    let mut agents = db::agents_of(&state.pool, model).await?;
     agents.retain(|a| a.retired_at.is_none());
     let every = i64::from(state.settings.continuous_self_play_every);
-    if every > 0 && !agents.is_empty() && cooperative_turn(state, every).await? {
-        let self_played = db::self_play_counts(&state.pool).await?;
+    if every > 0 && !agents.is_empty() && cooperative_turn(state, model, every).await? {
+        let self_played = db::self_play_counts(&state.pool, model).await?;
         let agent = cooperative_pick(&agents, &self_played).expect("an agent");
         return queue_continuous_match(state, agent, agent).await;
     }
     if agents.len() < 2 {
         return Ok(false);
     }
-    let outcomes = db::outcomes(&state.pool).await?;
+    let outcomes = db::outcomes(&state.pool, model).await?;
     // The leaderboard the API serves (cached; recomputed off the async threads when it changed).
-    let board = crate::board::current_board(state)
+    let board = crate::board::current_board(state, model)
         .await
         .map_err(|e| anyhow::anyhow!("computing the leaderboard: {e:?}"))?;
     let row = |id: i64| board.rows.iter().find(|r| r.agent_id == id);
@@ -43,7 +55,7 @@ pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     let provisional = |id: i64| row(id).is_none_or(|r| r.provisional);
     // Matches being played count as met, and their agents are picked last: the leaderboard does
     // not know their results yet.
-    let pending = db::running_pairs(&state.pool).await?;
+    let pending = db::running_pairs(&state.pool, model).await?;
     let met = |x: i64, y: i64| {
         let pair = |a: i64, b: i64| (a == x && b == y) || (a == y && b == x);
         outcomes.iter().filter(|o| pair(o.0, o.1)).count()
@@ -82,9 +94,10 @@ pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     queue_continuous_match(state, a, b).await
 }
 
-/// Whether continuous mode's next match is cooperative: every `every`-th match, the first included.
-async fn cooperative_turn(state: &AppState, every: i64) -> anyhow::Result<bool> {
-    Ok(db::match_count(&state.pool).await? % every == 0)
+/// Whether continuous mode's next match of robot `model` is cooperative: every `every`-th of its
+/// matches, the first included.
+async fn cooperative_turn(state: &AppState, model: &str, every: i64) -> anyhow::Result<bool> {
+    Ok(db::match_count(&state.pool, model).await? % every == 0)
 }
 
 /// The agent of continuous mode's next cooperative match: the fewest such matches so far
@@ -143,6 +156,7 @@ mod tests {
             id,
             name: format!("a{id}"),
             kind: crate::domain::AgentKind::Checkpoint,
+            model: "default".into(),
             spec_hash: String::new(),
             builtin: true,
             created_at: String::new(),

@@ -138,7 +138,11 @@ impl Workers {
                 tokio::spawn(async move {
                     while !stopping.load(std::sync::atomic::Ordering::SeqCst) {
                         let notified = state.wake.notified();
-                        match db::workers::claim(&state.pool, &state.worker, lease_ms).await {
+                        let robots: Vec<&str> =
+                            state.arenas.iter().map(|a| a.name.as_str()).collect();
+                        match db::workers::claim(&state.pool, &state.worker, lease_ms, &robots)
+                            .await
+                        {
                             Ok(Some((m, lease))) => {
                                 state.publish_match(m.id, db::MatchStatus::Running);
                                 if let Err(e) = run_one(&state, m, lease).await {

@@ -11,19 +11,22 @@ use agents::matchrun::MatchSpec;
 use crate::db;
 use crate::state::AppState;
 
-/// The player recipe of a stored agent, from the workers' cache (blocking on a miss: the checkpoint
-/// is parsed and its network built).
+/// The player recipe of a stored agent of match `m`'s robot, from the workers' cache (blocking on
+/// a miss: the checkpoint is parsed and its network built).
 pub fn player_spec(
     state: &AppState,
+    m: &db::Match,
     kind: db::AgentKind,
     spec: &str,
 ) -> Result<PlayerSpec, String> {
-    state.players.get(&state.model, kind, spec)
+    let arena = state.arenas.require(&m.model)?;
+    state.players.get(&arena.model, kind, spec)
 }
 
-/// The match runner's recipe for stored match `m`: its preset and simulator version must be this
-/// server's.
+/// The match runner's recipe for stored match `m`: its robot, preset and simulator version must be
+/// this server's.
 pub fn match_spec(state: &AppState, m: &db::Match) -> Result<MatchSpec, String> {
+    let arena = state.arenas.require(&m.model)?;
     let preset = sim::arena::PRESETS
         .iter()
         .find(|p| p.name == m.preset)
@@ -37,8 +40,8 @@ pub fn match_spec(state: &AppState, m: &db::Match) -> Result<MatchSpec, String> 
         ));
     }
     Ok(MatchSpec {
-        model: state.model.clone(),
-        config: state.arena.clone(),
+        model: arena.model.clone(),
+        config: arena.config.clone(),
         preset,
         rallies: m.rallies as u32,
         seed: m.seed as u64,
@@ -92,7 +95,7 @@ pub fn play(
         let first = recorded - chunk.len();
         let frames = serde_json::to_string(chunk)
             .map_err(|e| e.to_string())
-            .and_then(|f| crate::replay::with_body_poses(&state.model, &f));
+            .and_then(|f| crate::replay::with_body_poses(&spec.model, &f));
         if let Ok(frames) = frames {
             let data = format!("{{{},\"first\":{first},\"frames\":{frames}}}", head(k));
             let _ = tx.send(Arc::new(crate::live::LiveMsg {
@@ -172,8 +175,8 @@ pub fn resimulate_rally(
     if !specs_unchanged(m, &sa, &sb) {
         return Err("an agent's spec changed since the match was played".into());
     }
-    let a = player_spec(state, ka, &sa)?;
-    let b = player_spec(state, kb, &sb)?;
+    let a = player_spec(state, m, ka, &sa)?;
+    let b = player_spec(state, m, kb, &sb)?;
     agents::matchrun::replay_rally(&match_spec(state, m)?, &a, &b, k).map(|(_, frames)| frames)
 }
 
@@ -284,7 +287,7 @@ pub(super) async fn run_one(
     let result = tokio::task::spawn_blocking(move || {
         let mut built = sides.into_iter().map(|side| match side {
             Side::Built(player) => Ok(player),
-            Side::Spec(kind, spec) => player_spec(&st, kind, &spec),
+            Side::Spec(kind, spec) => player_spec(&st, &m, kind, &spec),
         });
         let a = built.next().ok_or("no side A")??;
         let b = built.next().ok_or("no side B")??;

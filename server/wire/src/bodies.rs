@@ -184,6 +184,9 @@ pub struct Health {
     /// What a submission must reach to be admitted.
     #[serde(default)]
     pub qualification: Option<QualificationRule>,
+    /// The robots this server plays, each with a leaderboard of its own (`?model=`).
+    #[serde(default)]
+    pub models: Vec<String>,
 }
 
 /// The admission rule: a submission plays `episodes` P2 serves (seed 0) and must hit at least

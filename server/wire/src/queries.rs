@@ -6,13 +6,32 @@ use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::MatchStatus;
 
-/// `GET /agents?all=1`: the retired agents too.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+/// `GET /agents?all=1&model=`: the retired agents too; one robot's.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AgentsQuery {
     /// List the retired agents too (`1`/`true`; `0`/`false` or absent: not).
     #[serde(default, deserialize_with = "yes_no")]
     pub all: bool,
+    /// Only the agents of this robot (absent: every robot's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+}
+
+/// `?model=NAME`: the robot whose leaderboard, arena or body is asked for (absent: `default`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ModelQuery {
+    /// The robot: `default` or `myochallenge` (`GET /health` lists the ones this server plays).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+}
+
+impl ModelQuery {
+    /// The robot asked for, `default` when none is.
+    pub fn robot(&self) -> &str {
+        self.model.as_deref().unwrap_or("default")
+    }
 }
 
 /// `?limit=N`: the lists of tournaments, SPRTs and an agent's crossings.
@@ -24,10 +43,13 @@ pub struct LimitQuery {
     pub limit: Option<i64>,
 }
 
-/// `GET /matches?agent=&status=&limit=&before=`: a page of matches, newest first.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+/// `GET /matches?agent=&status=&model=&limit=&before=`: a page of matches, newest first.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MatchesQuery {
+    /// Only the matches of this robot.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
     /// Only the matches of this agent (either side).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub agent: Option<i64>,

@@ -8,6 +8,11 @@ use serde::{Deserialize, Deserializer, Serialize};
 use crate::{AgentKind, MatchStatus, SprtStatus, TournamentKind, WorkerStatus};
 
 /// A yes/no the store may keep as 0/1 (SQLite has no boolean): true/false or an integer.
+/// The robot of rows from a server older than robots of their own.
+fn default_robot() -> String {
+    "default".into()
+}
+
 fn flag<'de, D: Deserializer<'de>>(d: D) -> Result<bool, D::Error> {
     #[derive(Deserialize)]
     #[serde(untagged)]
@@ -30,6 +35,9 @@ pub struct Agent {
     pub name: String,
     /// What it is.
     pub kind: AgentKind,
+    /// The robot it plays (`default`, `myochallenge`): it meets only agents of the same robot.
+    #[serde(default = "default_robot")]
+    pub model: String,
     /// Hash of its spec.
     pub spec_hash: String,
     /// Registered by the server itself.
@@ -63,6 +71,9 @@ pub struct Match {
     pub rallies: i64,
     /// Seed.
     pub seed: i64,
+    /// The robot both sides play (`default`, `myochallenge`).
+    #[serde(default = "default_robot")]
+    pub model: String,
     /// Arena preset.
     pub preset: String,
     /// Simulator version.

@@ -64,7 +64,7 @@ fn overhead(stores: &Stores) -> anyhow::Result<Value> {
         .build()?;
     runtime.block_on(async {
         let pool = server::db::open(&location).await?;
-        server::db::register_builtins(&pool).await?;
+        server::db::register_builtins(&pool, "default").await?;
         let all = server::db::agents(&pool).await?;
         anyhow::ensure!(all.len() >= 2, "fewer than two built-in agents");
         let spec = agents::matchrun::MatchSpec {
@@ -89,7 +89,7 @@ fn overhead(stores: &Stores) -> anyhow::Result<Value> {
         let frames = server::db::compress_replay(&record, &replay);
         for _ in 0..OVERHEAD_MATCHES {
             let t0 = Instant::now();
-            let (_, lease) = server::db::workers::claim(&pool, "bench", 60_000)
+            let (_, lease) = server::db::workers::claim(&pool, "bench", 60_000, &["default"])
                 .await?
                 .context("a queued match")?;
             let t1 = Instant::now();

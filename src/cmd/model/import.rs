@@ -22,7 +22,7 @@ pub const MYOSUITE_VERSION: &str = "3.0.0";
 const IMPORT_SCRIPT: &str = include_str!("../../../tools/myosuite_import.py");
 
 /// Where imported models go under the data directory.
-pub const MYOCHALLENGE_FILE: &str = "models/myochallenge.xml";
+pub use server::arenas::MYOCHALLENGE_FILE;
 
 /// Arguments of `rally model import`.
 #[derive(Args, Debug)]

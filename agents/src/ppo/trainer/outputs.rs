@@ -145,6 +145,7 @@ impl Trainer {
             format: FORMAT.into(),
             version: VERSION,
             name: name.into(),
+            model: sim::config::robot_name(&self.model).into(),
             controller: self.controller.clone(),
             observation: ObservationSpec {
                 blocks: ObsBlock::ALL.to_vec(),
