@@ -57,3 +57,66 @@ fn reproduce_writes_the_table_and_the_rally_section() {
     assert_eq!(run("b/reproduce.md"), md);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn reproduce_on_myosuites_robot_reads_its_checkpoints_and_names_its_report_after_it() {
+    // Needs the imported robot: `RALLY_MYOCHALLENGE` names the file `rally model import myosuite`
+    // wrote (`.ci/run` sets it in its MyoChallenge step).
+    let Some(xml) = std::env::var_os("RALLY_MYOCHALLENGE") else {
+        eprintln!(
+            "not run: set RALLY_MYOCHALLENGE to the file `rally model import myosuite` wrote"
+        );
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("rally-cli-reproduce-mc-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("data/models")).unwrap();
+    std::fs::copy(&xml, dir.join("data/models/myochallenge.xml")).unwrap();
+    // From a directory of its own: the defaults find config/checkpoints/myochallenge/ there and
+    // write docs/reproduce-myochallenge.md there.
+    std::fs::create_dir_all(dir.join("config/checkpoints/myochallenge")).unwrap();
+    std::fs::copy(
+        "config/checkpoints/myochallenge/kmac.json",
+        dir.join("config/checkpoints/myochallenge/kmac.json"),
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .current_dir(&dir)
+        .env("RALLY_DATA_DIR", dir.join("data"))
+        .args([
+            "reproduce",
+            "--model",
+            "myochallenge",
+            "--episodes",
+            "2",
+            "--rallies",
+            "2",
+            "--seed",
+            "5",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(dir.join("docs/reproduce-myochallenge.md")).unwrap();
+    assert!(
+        md.starts_with("# Reproducing the paper's Table I on the myochallenge robot (273 muscles)"),
+        "{md}"
+    );
+    assert!(
+        md.contains("`rally reproduce --model myochallenge --episodes 2"),
+        "{md}"
+    );
+    assert!(md.contains("config/train-myochallenge.toml"), "{md}");
+    let row = md
+        .lines()
+        .find(|l| l.starts_with("| Diff-Muscle |"))
+        .unwrap_or_else(|| panic!("no Diff-Muscle row: {md}"));
+    assert!(!row.contains("not trained yet"), "{row}");
+    assert!(
+        md.contains("| Muscle-PPO | not trained yet"),
+        "a method without a checkpoint of this robot is listed unplayed: {md}"
+    );
+    let png = std::fs::read(dir.join("docs/reproduce-myochallenge_curves.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,6 +1,7 @@
-//! `rally reproduce`: the paper's Table I in our simulator. Evaluates the committed checkpoints of
-//! the four methods (`config/checkpoints/{kmac,muscle-ppo,muscle-pd,dynsyn}.json`) and the scripted
-//! house agent on MyoChallenge P2 serves (seeds the training never drew: training serves come from
+//! `rally reproduce`: the paper's Table I in our simulator, on the default robot or (`--model
+//! myochallenge`) MyoSuite's. Evaluates the committed checkpoints of the four methods
+//! (`config/checkpoints/{kmac,muscle-ppo,muscle-pd,dynsyn}.json`, `config/checkpoints/ROBOT/` for
+//! another robot) and the scripted house agent on MyoChallenge P2 serves (seeds the training never drew: training serves come from
 //! their own streams of the training seed), and writes a markdown report with 95% intervals, the
 //! seeds, the paper's numbers beside ours, each checkpoint's provenance and the learning curves.
 
@@ -37,8 +38,10 @@ pub fn paper_row(m: Method) -> (f64, f64, f64) {
 /// Arguments of `rally reproduce`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  rally reproduce --episodes 1000 --seed 2026 --rallies 200\n  \
-                  (writes docs/reproduce.md, docs/reproduce_curves.png, docs/reproduce_rallies.png, docs/reproduce_returns.png)"
+    after_help = "Examples:\n  rally reproduce --episodes 1000 --seed 2026 --rallies 200\n  \
+                  (writes docs/reproduce.md, docs/reproduce_curves.png, docs/reproduce_rallies.png, docs/reproduce_returns.png)\n  \
+                  rally reproduce --model myochallenge --seed 2027\n  \
+                  (MyoSuite's robot: config/checkpoints/myochallenge/ to docs/reproduce-myochallenge.md and its PNGs)"
 )]
 pub struct ReproduceArgs {
     /// Episodes per agent.
@@ -47,15 +50,63 @@ pub struct ReproduceArgs {
     /// Evaluation seed: episode i has the serve and agent seeds `episode_seeds(seed, i)`.
     #[arg(long, default_value = "2026")]
     seed: u64,
-    /// Where the committed checkpoints are.
-    #[arg(long, default_value = "config/checkpoints")]
-    checkpoints: PathBuf,
-    /// The report to write (the learning-curve PNG goes beside it).
-    #[arg(long, default_value = "docs/reproduce.md")]
-    out: PathBuf,
+    /// Where the committed checkpoints are (default: config/checkpoints, or config/checkpoints/ROBOT
+    /// for another robot than the default).
+    #[arg(long)]
+    checkpoints: Option<PathBuf>,
+    /// The report to write, its PNGs beside it named after it (default: docs/reproduce.md, or
+    /// docs/reproduce-ROBOT.md for another robot than the default).
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Rallies per pairing in the dual-rally section (match seed: --seed); 0 skips the section.
     #[arg(long, default_value = "200")]
     rallies: u32,
+    #[command(flatten)]
+    model: super::ModelArg,
+}
+
+impl ReproduceArgs {
+    /// Whether the robot is the default one.
+    fn default_robot(&self) -> bool {
+        self.model.name == sim::config::DEFAULT_ROBOT
+    }
+
+    /// The checkpoints' directory.
+    fn checkpoints(&self) -> PathBuf {
+        match &self.checkpoints {
+            Some(dir) => dir.clone(),
+            None if self.default_robot() => PathBuf::from("config/checkpoints"),
+            None => Path::new("config/checkpoints").join(robot_file(&self.model.name)),
+        }
+    }
+
+    /// The report's path.
+    fn out(&self) -> PathBuf {
+        match &self.out {
+            Some(out) => out.clone(),
+            None if self.default_robot() => PathBuf::from("docs/reproduce.md"),
+            None => PathBuf::from(format!(
+                "docs/reproduce-{}.md",
+                robot_file(&self.model.name)
+            )),
+        }
+    }
+
+    /// A figure beside the report: `STEM_what.png`.
+    fn figure(&self, what: &str) -> PathBuf {
+        let out = self.out();
+        let stem = out
+            .file_stem()
+            .map_or("reproduce".into(), |s| s.to_string_lossy().to_string());
+        out.with_file_name(format!("{stem}_{what}.png"))
+    }
+}
+
+/// A `--model` as a file name: the robot's name, or an MJCF file's stem.
+fn robot_file(model: &str) -> String {
+    Path::new(model)
+        .file_stem()
+        .map_or(model.to_string(), |s| s.to_string_lossy().to_string())
 }
 
 /// The dual-rally pairings: the rally-trained agent against itself and the scripted agent, and the
@@ -77,10 +128,11 @@ struct Pairing {
     record: Result<agents::matchrun::MatchRecord, String>,
 }
 
-fn play_pairings(args: &ReproduceArgs, model: &std::sync::Arc<sim::model::Model>) -> Vec<Pairing> {
+fn play_pairings(args: &ReproduceArgs, body: &super::Body) -> Vec<Pairing> {
+    let model = &body.model;
     let spec = agents::matchrun::MatchSpec {
         model: model.clone(),
-        config: sim::config::ArenaConfig::default(),
+        config: body.config.clone(),
         preset: sim::arena::MYOCHALLENGE,
         rallies: args.rallies,
         seed: args.seed,
@@ -95,7 +147,7 @@ fn play_pairings(args: &ReproduceArgs, model: &std::sync::Arc<sim::model::Model>
         match PlayerSpec::scripted(name) {
             Some(s) => Ok(s),
             None => {
-                let path = args.checkpoints.join(format!("{name}.json"));
+                let path = args.checkpoints().join(format!("{name}.json"));
                 let text = std::fs::read_to_string(&path)
                     .map_err(|_| format!("not trained yet (no {})", path.display()))?;
                 Checkpoint::from_json(&text, model)
@@ -140,10 +192,11 @@ struct Row {
 
 /// Runs `rally reproduce`.
 pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
-    let model = super::default_model()?;
+    let body = args.model.load()?;
+    let model = body.model.clone();
     let evaluation = Evaluation {
         model: model.clone(),
-        config: sim::config::ArenaConfig::default(),
+        config: body.config.clone(),
         preset: sim::arena::MYOCHALLENGE,
         kind: ServeKind::P2,
         episodes: args.episodes as usize,
@@ -151,22 +204,23 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
     };
     let entrants = entrants(args, &model)?;
     let rows = evaluate_all(&evaluation, entrants, args.episodes)?;
-    let curves_png = args.out.with_file_name("reproduce_curves.png");
+    let out = args.out();
+    let curves_png = args.figure("curves");
     let series = training_curves(&rows);
-    if let Some(dir) = args.out.parent() {
+    if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir)?;
     }
     let plotted = !series.is_empty();
     if plotted {
         learning_curves(&series, &curves_png).map_err(|e| CliError::Failed(anyhow!(e)))?;
     }
-    let mut md = report(args, &rows, plotted.then_some(&curves_png));
+    let mut md = report(args, &model, &rows, plotted.then_some(&curves_png));
     if args.rallies > 0 {
-        md.push_str(&rallies(args, &model)?);
+        md.push_str(&rallies(args, &body)?);
     }
-    std::fs::write(&args.out, &md)?;
+    std::fs::write(&out, &md)?;
     print!("{md}");
-    eprintln!("wrote {}", args.out.display());
+    eprintln!("wrote {}", out.display());
     Ok(())
 }
 
@@ -176,7 +230,7 @@ fn entrants(args: &ReproduceArgs, model: &Arc<Model>) -> Result<Vec<Entrant>, Cl
     let mut agents: Vec<Entrant> = Vec::new();
     for m in Method::ALL {
         let path = args
-            .checkpoints
+            .checkpoints()
             .join(format!("{}.json", m.checkpoint_name()));
         match std::fs::read_to_string(&path) {
             Ok(text) => {
@@ -265,10 +319,10 @@ fn training_curves(rows: &[Row]) -> Vec<Series> {
 
 /// The dual-rally section: the pairings played, the rally-length histogram and (for the
 /// rally-trained agent) the serves and returns at the hitting plane, beside the report.
-fn rallies(args: &ReproduceArgs, model: &Arc<Model>) -> Result<String, CliError> {
-    let pairings = play_pairings(args, model);
+fn rallies(args: &ReproduceArgs, body: &super::Body) -> Result<String, CliError> {
+    let pairings = play_pairings(args, body);
     let played: Vec<&Pairing> = pairings.iter().filter(|p| p.record.is_ok()).collect();
-    let file = |suffix: &str| args.out.with_file_name(format!("reproduce_{suffix}.png"));
+    let file = |suffix: &str| args.figure(suffix);
     let name = |p: &std::path::Path| p.file_name().map(|n| n.to_string_lossy().to_string());
     let (hist, ret) = (file("rallies"), file("returns"));
     let mut hist_name = None;

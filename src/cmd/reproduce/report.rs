@@ -111,9 +111,14 @@ fn mean(m: &agents::eval::Mean) -> String {
 
 /// The report's markdown: the method, Table I beside the paper's, where the activation goes, how
 /// the episodes ended, the checkpoints' provenance and the learning curves.
-pub(super) fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf>) -> String {
+pub(super) fn report(
+    args: &ReproduceArgs,
+    model: &sim::model::Model,
+    rows: &[Row],
+    curves: Option<&PathBuf>,
+) -> String {
     let mut s = String::new();
-    intro(&mut s, args);
+    intro(&mut s, args, model);
     results_table(&mut s, rows);
     activation_table(&mut s, rows);
     episode_ends(&mut s, rows);
@@ -129,11 +134,26 @@ pub(super) fn report(args: &ReproduceArgs, rows: &[Row], curves: Option<&PathBuf
 }
 
 /// The title and how the numbers were made.
-fn intro(s: &mut String, args: &ReproduceArgs) {
-    let _ = writeln!(s, "# Reproducing the paper's Table I\n");
+fn intro(s: &mut String, args: &ReproduceArgs, model: &sim::model::Model) {
+    let robot = sim::config::robot_name(model);
+    let default = robot == sim::config::DEFAULT_ROBOT;
+    let muscles = model.muscles().count();
+    if default {
+        let _ = writeln!(s, "# Reproducing the paper's Table I\n");
+    } else {
+        let _ = writeln!(
+            s,
+            "# Reproducing the paper's Table I on the {robot} robot ({muscles} muscles)\n"
+        );
+    }
+    let flag = if default {
+        String::new()
+    } else {
+        format!(" --model {}", args.model.name)
+    };
     let _ = writeln!(
         s,
-        "Written by `rally reproduce --episodes {} --seed {} --rallies {}` (simulator {}). Every agent plays the same {} \
+        "Written by `rally reproduce{flag} --episodes {} --seed {} --rallies {}` (simulator {}). Every agent plays the same {} \
          MyoChallenge P2 serves in the single-serve environment: episode i uses the serve and agent seeds \
          `episode_seeds({}, i)`, i = 0…{}; training serves come from separate streams of each run's training \
          seed, so no evaluation serve was trained on. Rates are Wilson 95% intervals, means normal 95% intervals.\n",
@@ -145,12 +165,32 @@ fn intro(s: &mut String, args: &ReproduceArgs) {
         args.seed,
         args.episodes - 1
     );
+    let (config, effort) = if default {
+        (
+            "config/train.toml".to_string(),
+            format!(
+                "comparable only at equal muscle counts: this robot has {muscles} muscles, the paper's \
+                 273"
+            ),
+        )
+    } else {
+        (
+            format!("config/train-{robot}.toml"),
+            format!(
+                "over this robot's {muscles} muscles{}",
+                if muscles == 273 {
+                    ", the paper's robot's: directly comparable with its figures"
+                } else {
+                    ""
+                }
+            ),
+        )
+    };
     let _ = writeln!(
         s,
         "Every method is trained from scratch with the same PPO, reward, network and hyperparameters \
-         (`config/train.toml`); only the action space differs (docs/design.md §6). Effort is MyoSuite's \
-         mean ‖a‖₂/n_a (comparable only at equal muscle counts: ours has 75 muscles, the paper's model \
-         more); mean activation ‖a‖₁/n_a is comparable across models.\n"
+         (`{config}`); only the action space differs (docs/design.md §6). Effort is MyoSuite's \
+         mean ‖a‖₂/n_a ({effort}); mean activation ‖a‖₁/n_a is comparable across models.\n"
     );
     let _ = writeln!(
         s,
