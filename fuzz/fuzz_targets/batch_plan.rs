@@ -3,8 +3,6 @@
 //! serde_json and toml only.
 #![no_main]
 
-use std::collections::HashMap;
-
 use libfuzzer_sys::fuzz_target;
 
 #[allow(dead_code)]
@@ -16,8 +14,11 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     if let Ok(p) = plan::parse(text) {
-        let names: HashMap<String, i64> =
-            [("scripted".to_string(), 1), ("kmac".to_string(), 2)].into();
-        let _ = plan::jobs(&p, &names, &[1, 2, 3]);
+        let roster = plan::Roster {
+            names: [("scripted".to_string(), 1), ("kmac".to_string(), 2)].into(),
+            ids: vec![1, 2, 3],
+            others: vec![(4, "myochallenge-kmac".into(), "myochallenge".into())],
+        };
+        let _ = plan::jobs(&p, &roster);
     }
 });

@@ -6,6 +6,23 @@
 
 use super::*;
 
+/// `rally batch` of the plan `text` against the server at `addr`: its exit code and standard error.
+fn batch(dir: &std::path::Path, addr: &str, text: &str) -> (Option<i32>, String) {
+    let plan = dir.join("plan.toml");
+    std::fs::write(&plan, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .arg("batch")
+        .arg(&plan)
+        .args(["--server", &format!("http://{addr}"), "--token", TOKEN])
+        .env_remove("RALLY_TOKEN")
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
+}
+
 /// The error of an answer: its code and field.
 fn fault(v: &Value) -> (String, String) {
     let e: ErrorBody = serde_json::from_value(v.clone()).unwrap_or_else(|e| panic!("{e}: {v}"));
@@ -39,6 +56,20 @@ fn a_server_without_myosuites_robot_plays_the_default_one_and_says_how_to_import
             "{path}: {v}"
         );
     }
+
+    // A plan for a robot this server does not play submits nothing.
+    let (code, err) = batch(
+        &dir,
+        a,
+        "model = \"myochallenge\"\n[[match]]\na = \"scripted\"\nb = \"scripted\"\n",
+    );
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("the server plays no robot 'myochallenge'"),
+        "{err}"
+    );
+    let none: MatchList = get_as(a, "/api/v1/matches");
+    assert!(none.matches.is_empty());
 
     // A checkpoint of a robot this server does not play: refused before its admission, nothing
     // stored, the field named.
@@ -139,6 +170,17 @@ fn myosuites_robot_has_its_own_agents_matches_leaderboard_and_body() {
             "{path}"
         );
     }
+    // A plan naming another robot's agent submits nothing and says which robot that agent plays.
+    let (code, err) = batch(
+        &dir,
+        a,
+        "model = \"myochallenge\"\n[[match]]\na = \"myochallenge-scripted\"\nb = \"kmac\"\n",
+    );
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("('kmac') plays the default robot, not this plan's myochallenge"),
+        "{err}"
+    );
     let none: MatchList = get_as(a, "/api/v1/matches");
     assert!(none.matches.is_empty());
 

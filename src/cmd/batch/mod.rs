@@ -144,15 +144,27 @@ fn resolve(
     plan: &plan::Plan,
 ) -> Result<(Vec<Job>, HashMap<i64, String>), CliError> {
     let health: wire::Health = client.call("GET", "/healthz", None)?;
+    let robot = plan.model();
+    if !health.models.is_empty() && !health.models.iter().any(|m| m == robot) {
+        return Err(CliError::Usage(format!(
+            "{}: the server plays no robot '{robot}' (model); it plays: {}",
+            args.plan.display(),
+            health.models.join(", ")
+        )));
+    }
     let listed: wire::AgentList = client.call("GET", "/agents", None)?;
-    let mut by_name = HashMap::new();
+    let mut roster = plan::Roster::default();
     let mut names = HashMap::new();
     for a in listed.agents {
-        by_name.insert(a.name.clone(), a.id);
-        names.insert(a.id, a.name);
+        if a.model == robot {
+            roster.names.insert(a.name.clone(), a.id);
+            roster.ids.push(a.id);
+            names.insert(a.id, a.name);
+        } else {
+            roster.others.push((a.id, a.name, a.model));
+        }
     }
-    let ids: Vec<i64> = names.keys().copied().collect();
-    let jobs = jobs(plan, &by_name, &ids)
+    let jobs = jobs(plan, &roster)
         .map_err(|e| CliError::Usage(format!("{}: {e}", args.plan.display())))?;
     eprintln!(
         "server {} (simulator {}), {} agents; submitting {} entries",

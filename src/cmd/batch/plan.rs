@@ -28,6 +28,10 @@ pub enum AgentRef {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Plan {
+    /// The robot whose agents the plan names (`default`, `myochallenge`): agents meet only agents
+    /// of their own robot.
+    #[serde(default = "default_model")]
+    model: String,
     #[serde(default = "default_rallies")]
     rallies: u32,
     #[serde(default = "default_seed")]
@@ -52,6 +56,29 @@ struct PlanSprt {
     rallies_per_match: Option<u32>,
     max_matches: Option<u32>,
     seed: Option<u64>,
+}
+
+fn default_model() -> String {
+    "default".into()
+}
+
+impl Plan {
+    /// The robot the plan plays.
+    pub fn model(&self) -> &str {
+        &self.model
+    }
+}
+
+/// The server's agents as a plan sees them: those of the plan's robot by name and by id, and the
+/// other robots' (id, name, robot), so that naming one says which robot it plays.
+#[derive(Debug, Default)]
+pub struct Roster {
+    /// The plan's robot's agents by name.
+    pub names: HashMap<String, i64>,
+    /// Their ids.
+    pub ids: Vec<i64>,
+    /// Every other robot's agents: (id, name, robot).
+    pub others: Vec<(i64, String, String)>,
 }
 
 fn default_rallies() -> u32 {
@@ -119,13 +146,35 @@ pub enum Job {
     },
 }
 
-/// Turns the plan into requests, resolving agent names against the server's agents; a usage error
-/// for anything wrong, before anything is submitted.
-pub fn jobs(plan: &Plan, agents: &HashMap<String, i64>, ids: &[i64]) -> Result<Vec<Job>, String> {
+/// Turns the plan into requests, resolving agent names against the server's agents of the plan's
+/// robot; a usage error for anything wrong (an agent of another robot included), before anything
+/// is submitted.
+pub fn jobs(plan: &Plan, roster: &Roster) -> Result<Vec<Job>, String> {
+    let (agents, ids) = (&roster.names, &roster.ids);
+    let elsewhere = |at: &str, found: Option<&(i64, String, String)>| {
+        found.map(|(id, name, robot)| {
+            format!(
+                "{at}: agent {id} ('{name}') plays the {robot} robot, not this plan's {} (its `model`)",
+                plan.model
+            )
+        })
+    };
     let resolve = |r: &AgentRef, at: &str| -> Result<i64, String> {
         match r {
             AgentRef::Id(id) if ids.contains(id) => Ok(*id),
-            AgentRef::Id(id) => Err(format!("{at}: the server has no agent with id {id}")),
+            AgentRef::Id(id) => Err(elsewhere(at, roster.others.iter().find(|o| o.0 == *id))
+                .unwrap_or_else(|| format!("{at}: the server has no agent with id {id}"))),
+            AgentRef::Name(n) if !agents.contains_key(n) => {
+                if let Some(e) = elsewhere(at, roster.others.iter().find(|o| &o.1 == n)) {
+                    return Err(e);
+                }
+                let mut known: Vec<&str> = agents.keys().map(String::as_str).collect();
+                known.sort();
+                Err(format!(
+                    "{at}: the server has no agent named '{n}' (it has: {})",
+                    known.join(", ")
+                ))
+            }
             AgentRef::Name(n) => agents.get(n).copied().ok_or_else(|| {
                 let mut known: Vec<&str> = agents.keys().map(String::as_str).collect();
                 known.sort();
@@ -235,8 +284,12 @@ mod tests {
         let p = plan(
             "rallies = 5\nseed = 10\n[[match]]\na = \"x\"\nb = 2\nrepeat = 3\n[[match]]\na = 2\nb = \"x\"\nseed = 99\n[[tournament]]\nkind = \"gauntlet\"\nagents = [\"x\", 2]\n",
         );
-        let names: HashMap<String, i64> = [("x".to_string(), 1)].into();
-        let jobs = jobs(&p, &names, &[1, 2]).unwrap();
+        let roster = Roster {
+            names: [("x".to_string(), 1)].into(),
+            ids: vec![1, 2],
+            ..Roster::default()
+        };
+        let jobs = jobs(&p, &roster).unwrap();
         let m: Vec<(i64, i64, u32, u64)> = jobs
             .iter()
             .filter_map(|j| match j {
@@ -270,30 +323,44 @@ mod tests {
     #[test]
     fn a_plan_of_too_many_matches_is_refused_before_it_is_built() {
         let entry = "[[match]]\na = 1\nb = 1\nrepeat = 10000\n";
-        let names = HashMap::new();
+        let roster = Roster {
+            ids: vec![1],
+            ..Roster::default()
+        };
         let ok = plan(&entry.repeat(MAX_MATCHES / 10_000));
-        assert_eq!(jobs(&ok, &names, &[1]).unwrap().len(), MAX_MATCHES);
+        assert_eq!(jobs(&ok, &roster).unwrap().len(), MAX_MATCHES);
         let over = plan(&entry.repeat(MAX_MATCHES / 10_000 + 1));
-        let e = jobs(&over, &names, &[1]).err().unwrap();
+        let e = jobs(&over, &roster).err().unwrap();
         assert!(e.contains("more than 100000 matches"), "{e}");
     }
 
     #[test]
     fn bad_plans_are_refused_before_anything_is_sent() {
-        let names: HashMap<String, i64> = [("x".to_string(), 1)].into();
+        let names = Roster {
+            names: [("x".to_string(), 1)].into(),
+            ids: vec![1],
+            others: vec![(5, "mc".to_string(), "myochallenge".to_string())],
+        };
         let unknown = plan("[[match]]\na = \"x\"\nb = \"nobody\"\n");
-        let e = jobs(&unknown, &names, &[1]).err().unwrap();
+        let e = jobs(&unknown, &names).err().unwrap();
         assert!(
             e.contains("no agent named 'nobody'") && e.contains("it has: x"),
             "{e}"
         );
-        assert!(jobs(&plan("[[match]]\na = 1\nb = 7\n"), &names, &[1]).is_err());
-        assert!(
-            jobs(&plan("rallies = 3\n"), &names, &[1]).is_err(),
-            "empty plan"
-        );
+        assert!(jobs(&plan("[[match]]\na = 1\nb = 7\n"), &names).is_err());
+        // Another robot's agent, by name or id: said so, with its robot.
+        for other in ["\"mc\"", "5"] {
+            let e = jobs(&plan(&format!("[[match]]\na = 1\nb = {other}\n")), &names)
+                .err()
+                .unwrap();
+            assert!(
+                e.contains("agent 5 ('mc') plays the myochallenge robot, not this plan's default"),
+                "{e}"
+            );
+        }
+        assert!(jobs(&plan("rallies = 3\n"), &names).is_err(), "empty plan");
         let kind = plan("[[tournament]]\nkind = \"swiss\"\nagents = [1, 1]\n");
-        assert!(jobs(&kind, &names, &[1]).err().unwrap().contains("swiss"));
+        assert!(jobs(&kind, &names).err().unwrap().contains("swiss"));
         assert!(
             toml::from_str::<Plan>("[[match]]\na = 1\nb = 2\nrally = 3\n").is_err(),
             "unknown key"
