@@ -11,6 +11,9 @@ use sim::model::Model;
 
 /// MyoSuite's robot's name.
 pub const MYOCHALLENGE: &str = "myochallenge";
+/// Every robot a server may play besides the default one: their built-ins' names begin with
+/// `ROBOT-`, which submissions may not take (before the robot is imported either).
+pub const OTHER_ROBOTS: &[&str] = &[MYOCHALLENGE];
 /// Where `rally model import myosuite` writes MyoSuite's robot, under the data directory.
 pub const MYOCHALLENGE_FILE: &str = "models/myochallenge.xml";
 
@@ -113,6 +116,17 @@ pub fn builtin_name(robot: &str, name: &str) -> String {
     } else {
         format!("{robot}-{name}")
     }
+}
+
+/// Why a submission may not take `name`: it is spelled as another robot's built-in (`ROBOT-…`,
+/// in any case), whether that robot is imported yet or not.
+pub fn reserved_name(name: &str) -> Option<String> {
+    OTHER_ROBOTS.iter().find_map(|robot| {
+        let prefix = format!("{robot}-");
+        name.to_ascii_lowercase().starts_with(&prefix).then(|| {
+            format!("names beginning with '{prefix}' are kept for the {robot} robot's built-ins")
+        })
+    })
 }
 
 /// Where MyoSuite's robot is imported, under `data_dir`.

@@ -99,6 +99,17 @@ enum CheckpointCommand {
 
 /// Runs `rally checkpoint`.
 pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
+    // The admission loads its robot itself: a robot that does not load is the server's failure
+    // (its setup), not the checkpoint's.
+    if let CheckpointCommand::Admit {
+        episodes,
+        seed,
+        cpu_s,
+        memory_mb,
+    } = &args.command
+    {
+        return admit(&args.model, *episodes, *seed, *cpu_s, *memory_mb);
+    }
     let body = args.model.load()?;
     let model = body.model.clone();
     match &args.command {
@@ -117,12 +128,7 @@ pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
             out,
             note,
         } => scale_noise(&model, file, *factor, name.as_deref(), out, note.as_deref()),
-        CheckpointCommand::Admit {
-            episodes,
-            seed,
-            cpu_s,
-            memory_mb,
-        } => admit(body, *episodes, *seed, *cpu_s, *memory_mb),
+        CheckpointCommand::Admit { .. } => unreachable!("admitted above"),
     }
 }
 
@@ -211,7 +217,7 @@ const MAX_MESSAGE: usize = 2048;
 /// `rally checkpoint admit`: limits itself, reads the checkpoint from standard input, prints the
 /// admission's outcome.
 fn admit(
-    body: super::Body,
+    robot: &super::ModelArg,
     episodes: usize,
     seed: u64,
     cpu_s: f64,
@@ -226,6 +232,14 @@ fn admit(
         eprintln!("rally checkpoint admit: {e}");
         std::process::exit(server::ADMIT_SETUP_FAILED);
     }
+    let body = robot.load().unwrap_or_else(|e| {
+        let why = match e {
+            CliError::Usage(m) => m,
+            CliError::Failed(e) => format!("{e:#}"),
+        };
+        eprintln!("rally checkpoint admit: loading the robot: {why}");
+        std::process::exit(server::ADMIT_SETUP_FAILED);
+    });
     // Panics are caught and become outcomes; their default report would only echo hostile text.
     std::panic::set_hook(Box::new(|_| {}));
     let mut text = String::new();

@@ -41,7 +41,8 @@ max_body_bytes = 8388608
 admin_token = ""
 `);
 const server = spawn(rally, ['serve', '--config', join(dir, 'server.toml')], {
-  env: { ...process.env, RALLY_ADMIN_TOKEN: TOKEN, RUST_LOG: 'warn' },
+  // The default robot alone (the test's own data directory), whatever this machine has imported.
+  env: { ...process.env, RALLY_DATA_DIR: dir, RALLY_ADMIN_TOKEN: TOKEN, RUST_LOG: 'warn' },
   stdio: ['ignore', 'pipe', 'inherit'],
 });
 const base = await new Promise((resolve, reject) => {

@@ -146,12 +146,17 @@ pub fn start_serve(dir: &Path, workers: usize, continuous: bool, extra: &str) ->
 /// A `rally worker` process named `name` on the database of `dir/server.toml`, once it says it is
 /// ready; killed when dropped.
 pub fn start_worker(dir: &Path, name: &str) -> Server {
+    start_worker_with_data(dir, name, dir)
+}
+
+/// [`start_worker`] with the data directory `data` (the robots it has imported).
+pub fn start_worker_with_data(dir: &Path, name: &str, data: &Path) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_rally"))
         .args(["worker", "--config"])
         .arg(dir.join("server.toml"))
         .args(["--db", &db(dir)])
         .args(["--name", name])
-        .env("RALLY_DATA_DIR", dir)
+        .env("RALLY_DATA_DIR", data)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())

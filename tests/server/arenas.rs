@@ -89,6 +89,16 @@ fn a_server_without_myosuites_robot_plays_the_default_one_and_says_how_to_import
     );
     let after: AgentList = get_as(a, "/api/v1/agents");
     assert_eq!(after.agents.len(), agents.agents.len());
+    // Another robot's built-ins' names are kept for it, imported or not.
+    let (code, v) = call(
+        a,
+        "POST",
+        "/api/v1/agents",
+        Some(&json!({"name": "MyoChallenge-kmac", "checkpoint": template("squat")})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 400, "{v}");
+    assert_eq!(fault(&v).1, "name");
     // One naming the default robot, or none (a file from before robots had names), is its agent.
     let mut named = template("named");
     named["model"] = json!("default");
@@ -219,6 +229,11 @@ fn myosuites_robot_has_its_own_agents_matches_leaderboard_and_body() {
     let theirs: Leaderboard = get_as(a, "/api/v1/leaderboard?model=myochallenge");
     let ours: Leaderboard = get_as(a, "/api/v1/leaderboard");
     assert_eq!(theirs.matches, 1);
+    assert_eq!(
+        theirs.anchor.as_ref().map(|x| x.agent.as_str()),
+        Some("myochallenge-scripted"),
+        "its scale is anchored on its own scripted agent"
+    );
     assert_eq!(ours.matches, 0);
     let ids = |b: &Leaderboard| b.rows.iter().map(|r| r.agent_id).collect::<Vec<_>>();
     assert!(ids(&theirs)
@@ -246,4 +261,60 @@ fn myosuites_robot_has_its_own_agents_matches_leaderboard_and_body() {
         201,
     );
     assert_eq!(s.agent.model, "myochallenge");
+
+    // The robot's file gone from under the server: the admission cannot load it, which is the
+    // server's failure (500), not the checkpoint's, and nothing is stored.
+    std::fs::remove_file(dir.join("models/myochallenge.xml")).unwrap();
+    let kmac: Value = serde_json::from_str(
+        agents::builtins::checkpoint_of("myochallenge", "kmac").expect("built in"),
+    )
+    .unwrap();
+    let (code, v) = call(
+        a,
+        "POST",
+        "/api/v1/agents",
+        Some(&json!({"name": "orphan", "checkpoint": kmac})),
+        Some(TOKEN),
+    );
+    assert_eq!(code, 500, "{v}");
+    let after: AgentList = get_as(a, "/api/v1/agents");
+    assert!(after.agents.iter().all(|x| x.name != "orphan"));
+}
+
+#[test]
+fn a_worker_plays_only_the_robots_it_has_imported() {
+    let Some(xml) = imported() else { return };
+    let dir = tempdir("robot-workers");
+    std::fs::create_dir_all(dir.join("models")).unwrap();
+    std::fs::copy(&xml, dir.join("models/myochallenge.xml")).unwrap();
+    // The API alone (it has both robots), the scripted built-ins only.
+    let srv = start_serve(&dir, 0, false, "builtin_checkpoints = \"\"\n");
+    let a = srv.addr.as_str();
+    let queue = |x: &str, y: &str| -> server::wire::Match {
+        post_as(
+            a,
+            "/api/v1/matches",
+            &QueueMatch {
+                a: x.into(),
+                b: y.into(),
+                rallies: 1,
+                seed: Some(3),
+            },
+            Some(TOKEN),
+            202,
+        )
+    };
+    // Theirs first: the oldest queued match, which a worker without the import must pass over.
+    let theirs = queue("myochallenge-scripted", "myochallenge-scripted");
+    let ours = queue("scripted", "scripted");
+    let bare = dir.join("bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    let _plain = start_worker_with_data(&dir, "plain", &bare);
+    wait_for(a, ours.id, "done", Duration::from_secs(120));
+    std::thread::sleep(Duration::from_secs(2));
+    let still: Value = get_as(a, &format!("/api/v1/matches/{}", theirs.id));
+    assert_eq!(still["status"], "queued", "{still}");
+    let _full = start_worker(&dir, "full");
+    let done = wait_for(a, theirs.id, "done", Duration::from_secs(300));
+    assert_eq!(done["worker"], "full", "{done}");
 }

@@ -162,6 +162,9 @@ pub(super) async fn submit_agent(State(s): State<AppState>, req: Request) -> Api
         body
     };
     check_name(&body.name).map_err(|m| ApiError::bad("name", m))?;
+    if let Some(why) = crate::arenas::reserved_name(&body.name) {
+        return Err(ApiError::bad("name", why));
+    }
     // Names are unique regardless of case: `SCRIPTED` is not a second `scripted`.
     if let Some(a) = db::agent_by_name(&s.pool, &body.name).await? {
         return Err(ApiError::name_taken("an agent", &a.name));

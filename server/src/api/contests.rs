@@ -62,8 +62,10 @@ pub(super) async fn create_tournament(
             format!("agent '{}' is listed twice", dup.name),
         ));
     }
-    if let Some(odd) = agents.iter().find(|a| a.model != agents[0].model) {
-        return Err(same_robot(&agents[0], odd, "agents").unwrap_err());
+    if let Some(first) = agents.first() {
+        for other in &agents {
+            same_robot(&s, first, other, "agents")?;
+        }
     }
     let rallies = pairs.len() as u64 * u64::from(t.rallies_per_match);
     charge(
@@ -230,7 +232,7 @@ pub(super) async fn create_sprt(
     if a.id == b.id {
         return Err(ApiError::bad("b", "an SPRT needs two different agents"));
     }
-    same_robot(&a, &b, "b")?;
+    same_robot(&s, &a, &b, "b")?;
     // Its first match is queued now; it may play up to max_matches of them.
     let most = u64::from(t.max_matches) * u64::from(t.rallies_per_match);
     charge(&s, caller, &[(Budget::Matches, 1), (Budget::Rallies, most)])?;

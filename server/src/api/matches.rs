@@ -91,7 +91,7 @@ pub(super) async fn queue_match(
     let seed = seed_or_clock(q.seed)?;
     let a = agent_or_404(&s, &q.a, "a").await?;
     let b = agent_or_404(&s, &q.b, "b").await?;
-    same_robot(&a, &b, "b")?;
+    same_robot(&s, &a, &b, "b")?;
     charge(
         &s,
         caller,

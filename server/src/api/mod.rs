@@ -374,10 +374,18 @@ async fn agent_or_404(s: &AppState, r: &AgentRef, field: &'static str) -> ApiRes
     }
 }
 
-/// 422 naming `field` unless `b` plays `a`'s robot: agents of different robots never meet.
-fn same_robot(a: &db::Agent, b: &db::Agent, field: &'static str) -> ApiResult<()> {
+/// 422 naming `field` unless `b` plays `a`'s robot (agents of different robots never meet), and
+/// unless this server plays that robot (a match nobody here can play would wait forever).
+fn same_robot(s: &AppState, a: &db::Agent, b: &db::Agent, field: &'static str) -> ApiResult<()> {
     if a.model == b.model {
-        return Ok(());
+        return s
+            .arenas
+            .require(&a.model)
+            .map(|_| ())
+            .map_err(|e| ApiError {
+                field: Some(field.into()),
+                ..ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "unknown_robot", e)
+            });
     }
     Err(ApiError {
         field: Some(field.into()),

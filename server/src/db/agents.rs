@@ -9,13 +9,20 @@ use super::*;
 pub async fn register_builtins(pool: &Pool, model: &str) -> anyhow::Result<()> {
     for (variant, _) in ::agents::scripted::variants() {
         let name = crate::arenas::builtin_name(model, variant);
-        sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin, model) SELECT $1, 'scripted', $2, $3, 1, $4 WHERE NOT EXISTS (SELECT 1 FROM agents WHERE lower(name) = lower($1))")
+        let added = sqlx::query("INSERT INTO agents (name, kind, spec, spec_hash, builtin, model) SELECT $1, 'scripted', $2, $3, 1, $4 WHERE NOT EXISTS (SELECT 1 FROM agents WHERE lower(name) = lower($1))")
             .bind(&name)
             .bind(variant)
             .bind(spec_hash(variant))
             .bind(model)
             .execute(pool)
             .await?;
+        if added.rows_affected() == 0 {
+            if let Some(a) = agent_by_name(pool, &name).await? {
+                if !a.builtin || a.model != model || a.kind != AgentKind::Scripted {
+                    tracing::warn!(%name, robot = model, "another agent holds the name of a scripted built-in; keeping it (that robot's ratings have no anchor of that name)");
+                }
+            }
+        }
     }
     Ok(())
 }

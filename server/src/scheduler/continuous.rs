@@ -10,7 +10,11 @@ use crate::state::AppState;
 pub(super) async fn queue_continuous(state: &AppState) -> anyhow::Result<bool> {
     let mut queued = false;
     for arena in state.arenas.iter() {
-        queued |= queue_continuous_of(state, &arena.name).await?;
+        // One robot's failure (its store's answer, its board) leaves the others' matches coming.
+        match queue_continuous_of(state, &arena.name).await {
+            Ok(q) => queued |= q,
+            Err(e) => tracing::error!(robot = %arena.name, error = %e, "continuous mode failed"),
+        }
     }
     Ok(queued)
 }

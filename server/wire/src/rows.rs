@@ -7,12 +7,12 @@ use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::{AgentKind, MatchStatus, SprtStatus, TournamentKind, WorkerStatus};
 
-/// A yes/no the store may keep as 0/1 (SQLite has no boolean): true/false or an integer.
 /// The robot of rows from a server older than robots of their own.
 fn default_robot() -> String {
     "default".into()
 }
 
+/// A yes/no the store may keep as 0/1 (SQLite has no boolean): true/false or an integer.
 fn flag<'de, D: Deserializer<'de>>(d: D) -> Result<bool, D::Error> {
     #[derive(Deserialize)]
     #[serde(untagged)]

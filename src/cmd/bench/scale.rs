@@ -114,10 +114,12 @@ impl Drop for Kill {
     }
 }
 
-/// Starts this binary with `args`; returns it once its first stdout line is out, and that line.
-fn spawn(args: &[&str]) -> anyhow::Result<(Kill, String)> {
+/// Starts this binary with `args` (its data directory `dir`: the default robot alone, whatever the
+/// machine has imported); returns it once its first stdout line is out, and that line.
+fn spawn(dir: &std::path::Path, args: &[&str]) -> anyhow::Result<(Kill, String)> {
     let mut child = Command::new(std::env::current_exe()?)
         .args(args)
+        .env("RALLY_DATA_DIR", dir)
         .env("RUST_LOG", "error")
         .env("RALLY_ADMIN_TOKEN", super::BENCH_TOKEN)
         .stdout(Stdio::piped())
@@ -150,18 +152,21 @@ fn throughput(
     std::fs::write(&config, format!("{settings}\nbuiltin_checkpoints = \"\"\n"))?;
     let config = config.display().to_string();
     let workers = in_server.to_string();
-    let (_server, line) = spawn(&[
-        "serve",
-        "--config",
-        &config,
-        "--db",
-        &db,
-        "--addr",
-        "127.0.0.1:0",
-        "--workers",
-        &workers,
-        "--no-continuous",
-    ])?;
+    let (_server, line) = spawn(
+        dir,
+        &[
+            "serve",
+            "--config",
+            &config,
+            "--db",
+            &db,
+            "--addr",
+            "127.0.0.1:0",
+            "--workers",
+            &workers,
+            "--no-continuous",
+        ],
+    )?;
     let addr = line
         .strip_prefix("listening on http://")
         .ok_or_else(|| anyhow!("unexpected first line {line:?}"))?
@@ -185,7 +190,13 @@ fn throughput(
     let mut children = Vec::new();
     for w in 0..processes {
         let name = format!("bench-{w}");
-        children.push(spawn(&["worker", "--config", &config, "--db", &db, "--name", &name])?.0);
+        children.push(
+            spawn(
+                dir,
+                &["worker", "--config", &config, "--db", &db, "--name", &name],
+            )?
+            .0,
+        );
     }
     loop {
         let done = super::call_json(&addr, "GET", "/api/v1/matches?status=done&limit=1000", "")?;

@@ -151,6 +151,11 @@ fn start_server(db: &std::path::Path, toml: &str) -> anyhow::Result<(std::proces
         .arg(&config)
         .arg("--db")
         .arg(db)
+        // The default robot alone, whatever the machine has imported.
+        .env(
+            "RALLY_DATA_DIR",
+            db.parent().unwrap_or(std::path::Path::new(".")),
+        )
         .env("RUST_LOG", "warn")
         .env("RALLY_ADMIN_TOKEN", BENCH_TOKEN)
         .stdout(std::process::Stdio::piped())

@@ -175,7 +175,11 @@ fn intro(s: &mut String, args: &ReproduceArgs, model: &sim::model::Model) {
         )
     } else {
         (
-            format!("config/train-{robot}.toml"),
+            if robot == "myochallenge" {
+                "config/train-myochallenge.toml".to_string()
+            } else {
+                "the run's configuration: its provenance below".to_string()
+            },
             format!(
                 "over this robot's {muscles} muscles{}",
                 if muscles == 273 {
