@@ -4,12 +4,14 @@
 // agents' names and numbers, that the replay canvas draws and changes when played, that the
 // leaderboard updates without a reload when a match finishes (server-sent events), that a running
 // match can be watched live, and that the pages
-// fit 1280×800 and a phone's width. Screenshots go to $ARTIFACTS (default target/browser).
+// fit 1280×800 and a phone's width. With RALLY_MYOCHALLENGE naming the file `rally model import
+// myosuite` wrote, the server also plays MyoSuite's robot: its leaderboard behind the page's robot
+// switch and a replay drawing its body. Screenshots go to $ARTIFACTS (default target/browser).
 //
 // Usage (from the repository root, after `cargo build` or `cargo test`):
 //   node tests/browser/pages.mjs [path/to/rally]      CHROMIUM=/usr/bin/chromium by default
 import { spawn } from 'node:child_process';
-import { mkdirSync, mkdtempSync, writeFileSync } from 'node:fs';
+import { copyFileSync, mkdirSync, mkdtempSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { createInterface } from 'node:readline';
@@ -27,6 +29,11 @@ const check = (ok, what) => {
 
 // --- the server
 const dir = mkdtempSync(join(tmpdir(), 'rally-browser-'));
+const myosuite = process.env.RALLY_MYOCHALLENGE;
+if (myosuite) {
+  mkdirSync(join(dir, 'models'), { recursive: true });
+  copyFileSync(myosuite, join(dir, 'models', 'myochallenge.xml'));
+}
 writeFileSync(join(dir, 'server.toml'), `addr = "127.0.0.1:0"
 db = "${process.env.RALLY_TEST_DB || join(dir, 'rally.db')}"
 workers = 1
@@ -184,6 +191,37 @@ try {
     await api('DELETE', `/matches/${long.id}`);
     check(errors.length === 0, `live view: no console errors ${JSON.stringify(errors)}`);
     await page.close();
+  }
+
+  // --- MyoSuite's robot: its own leaderboard behind the switch, its body in the replay
+  if (myosuite) {
+    const mc = await api('POST', '/matches', { a: 'myochallenge-kmac', b: 'myochallenge-scripted', rallies: 2, seed: 11 });
+    check(mc.model === 'myochallenge', `a match of MyoSuite's robot is queued (${mc.model})`);
+    await finished(mc.id);
+    const { page, errors } = await open('/?model=myochallenge');
+    await page.waitForSelector('#board tbody tr');
+    const board = await page.textContent('#board');
+    check(board.includes('myochallenge-kmac') && !/\bkmac-rally\b/.test(board), 'its leaderboard shows its agents only');
+    check(!(await page.locator('#robots').isHidden()) && (await page.inputValue('#robot')) === 'myochallenge',
+      'the robot switch shows and names it');
+    await page.screenshot({ path: join(artifacts, 'leaderboard-myochallenge.png'), fullPage: true });
+    await page.selectOption('#robot', 'default');
+    await page.waitForURL(/model=default/);
+    await page.waitForSelector('#board tbody tr');
+    check((await page.textContent('#board')).includes('kmac-rally'), 'switching back shows the default robot\'s board');
+    check(errors.length === 0, `robot switch: no console errors ${JSON.stringify(errors)}`);
+    await page.close();
+    const replay = await open(`/replay?match=${mc.id}&rally=0`);
+    await replay.page.waitForFunction(() => /frames at/.test(document.querySelector('#msg').textContent));
+    const ink = await replay.page.evaluate(() => {
+      const c = document.querySelector('#view'), d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+      let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n;
+    });
+    check(ink > 10000, `the replay draws MyoSuite's robot (${ink} painted pixels)`);
+    check((await replay.page.textContent('#sub')).includes('myochallenge robot'), 'the replay names the robot');
+    await replay.page.screenshot({ path: join(artifacts, 'replay-myochallenge.png') });
+    check(replay.errors.length === 0, `MyoSuite replay: no console errors ${JSON.stringify(replay.errors)}`);
+    await replay.page.close();
   }
 
   // --- every page at a phone's width
