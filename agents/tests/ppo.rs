@@ -76,7 +76,7 @@ fn the_rally_finetune_configuration_is_the_rally_one_but_for_the_ball_out_term()
 }
 
 #[test]
-fn the_myochallenge_configuration_is_the_default_but_for_the_official_kmac_and_noise() {
+fn the_myochallenge_configuration_is_the_default_but_for_the_official_kmac_noise_and_schedule() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../config/train-myochallenge.toml"
@@ -92,6 +92,8 @@ fn the_myochallenge_configuration_is_the_default_but_for_the_official_kmac_and_n
     );
     c.controller.action_noise = 0.0;
     c.controller.activation_noise = 0.0;
+    assert_eq!(c.ppo.schedule, agents::ppo::Schedule::LinearDecay);
+    c.ppo.schedule = agents::ppo::Schedule::Adaptive;
     assert_eq!(c, TrainConfig::default());
 }
 
@@ -202,6 +204,30 @@ fn a_resumed_run_is_the_same_run_bit_for_bit() {
         );
         let _ = std::fs::remove_dir_all(&dir);
     }
+}
+
+#[test]
+fn the_linear_decay_schedule_falls_to_zero_at_the_step_target() {
+    let mut cfg = small(4, 8, 2);
+    cfg.ppo.schedule = agents::ppo::Schedule::LinearDecay;
+    let lr0 = cfg.ppo.learning_rate;
+    let mut t = Trainer::new(model(), Method::Kmac, cfg, 3).unwrap();
+    let per = 4 * 8;
+    t.steps_target = 4 * per;
+    let mut rates = Vec::new();
+    for _ in 0..4 {
+        let row = t.iterate().unwrap();
+        rates.push(row.learning_rate);
+    }
+    // Set before each iteration's update from the steps done before it: 1, 3/4, 1/2, 1/4 of lr0.
+    let want: Vec<f64> = [1.0, 0.75, 0.5, 0.25].iter().map(|f| lr0 * f).collect();
+    for (got, want) in rates.iter().zip(&want) {
+        assert!((got - want).abs() < 1e-15, "{rates:?} against {want:?}");
+    }
+    assert_eq!(t.linear_decay_lr(), 0.0, "zero once the target is reached");
+    // Without a target (a trainer outside `rally train`) the rate stays put.
+    t.steps_target = 0;
+    assert_eq!(t.linear_decay_lr(), lr0);
 }
 
 #[test]

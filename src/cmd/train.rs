@@ -239,6 +239,7 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
     } else {
         start(args, &dir, config, body)?
     };
+    trainer.steps_target = args.steps;
     let out = Outputs {
         dir,
         name: args

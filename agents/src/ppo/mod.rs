@@ -116,6 +116,10 @@ pub enum Schedule {
     /// rsl_rl's adaptive KL rule: per minibatch ÷1.5 when KL > 2·target, ×1.5 when KL < target/2,
     /// within [1e-5, 1e-2].
     Adaptive,
+    /// Linear decay from `learning_rate` at the first step to zero at the run's step target
+    /// (`rally train --steps`), set at the start of each iteration from the steps done; a run
+    /// extended past its first target decays from where it is to the new one.
+    LinearDecay,
 }
 
 /// PPO's hyperparameters. The official code's values (docs/design.md §11) are in the comments where ours
@@ -133,8 +137,7 @@ pub struct PpoConfig {
     pub minibatches: usize,
     /// Initial learning rate (official 5e-4).
     pub learning_rate: f64,
-    /// Learning-rate schedule (the official config names `linear_decay`, not implemented here;
-    /// docs/design.md §11).
+    /// Learning-rate schedule (the official config names `linear_decay`; docs/design.md §11).
     pub schedule: Schedule,
     /// KL target of the adaptive schedule (official 0.01).
     pub desired_kl: f64,

@@ -81,6 +81,9 @@ pub struct Trainer {
     pub arena: ArenaConfig,
     /// The robot's name as the command line gave it (`default`, `myochallenge`, a file).
     pub model_name: String,
+    /// The env steps the run is to reach (`rally train --steps`): where the `linear_decay`
+    /// schedule reaches zero (0: unknown, the schedule keeps `learning_rate`).
+    pub steps_target: u64,
 }
 
 fn e(err: candle_core::Error) -> String {
@@ -175,6 +178,7 @@ impl Trainer {
             model,
             arena,
             model_name: model_name.to_string(),
+            steps_target: 0,
         })
     }
 
@@ -233,6 +237,9 @@ impl Trainer {
         {
             self.begin_segment();
         }
+        if self.config.ppo.schedule == Schedule::LinearDecay {
+            self.adam.lr = self.linear_decay_lr();
+        }
         let log_std = self.net.log_std.as_tensor().detach();
         let rollout = self.collect(&log_std)?;
         let t2 = Instant::now();
@@ -247,6 +254,17 @@ impl Trainer {
         let row = self.curve_row(&losses, rollout.tracking)?;
         self.progress.curve.push(row);
         Ok(row)
+    }
+
+    /// The `linear_decay` schedule's rate at the steps done: `learning_rate` scaled by the share
+    /// of `steps_target` still to go.
+    pub fn linear_decay_lr(&self) -> f64 {
+        let lr = self.config.ppo.learning_rate;
+        if self.steps_target == 0 {
+            return lr;
+        }
+        let left = 1.0 - self.progress.env_steps as f64 / self.steps_target as f64;
+        lr * left.max(0.0)
     }
 
     /// GAE over the rollout, bootstrapped from the critic's values of the observations after it.
