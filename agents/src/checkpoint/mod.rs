@@ -490,4 +490,38 @@ impl Checkpoint {
             training: None,
         }
     }
+
+    /// A checkpoint around an ONNX network trained elsewhere: `controller` maps its actions (the
+    /// network's output, clipped to [−1, 1]) to muscle controls, and `norm` (mean, std) is applied to
+    /// the observation before the network (`None`: mean 0, std 1, the raw observation). Plays the
+    /// network's mean action (no `policy_std`). Validated against `model`, ONNX graph included, with
+    /// the offending field named.
+    pub fn from_onnx(
+        model: &Model,
+        name: &str,
+        controller: ControllerSpec,
+        onnx: &[u8],
+        norm: Option<(Vec<f64>, Vec<f64>)>,
+        grip_floor: Option<f64>,
+    ) -> Result<Checkpoint, CheckpointError> {
+        let space = ActionSpace::new(model);
+        let blocks = ObsBlock::ALL.to_vec();
+        let obs: usize = blocks.iter().map(|b| b.size(&space)).sum();
+        let (mean, std) = norm.unwrap_or_else(|| (vec![0.0; obs], vec![1.0; obs]));
+        let c = Checkpoint {
+            format: FORMAT.into(),
+            version: VERSION,
+            name: name.into(),
+            model: sim::config::robot_name(model).into(),
+            controller,
+            observation: ObservationSpec { blocks, mean, std },
+            policy: None,
+            onnx: Some(OnnxPolicy::from_bytes(onnx)),
+            policy_std: None,
+            grip_floor,
+            training: None,
+        };
+        c.validate(model)?;
+        Ok(c)
+    }
 }

@@ -1,4 +1,7 @@
-//! `rally checkpoint`: write a template checkpoint of the right shape, or validate one.
+//! `rally checkpoint`: write a template checkpoint of the right shape, or validate one; name the
+//! entries a method's network reads and writes, and wrap an ONNX network trained elsewhere ([`onnx`]).
+
+mod onnx;
 
 use std::path::{Path, PathBuf};
 
@@ -49,6 +52,49 @@ enum CheckpointCommand {
     Builtin {
         /// Its name.
         name: String,
+    },
+    /// Name every entry of the observation a method's network reads (normalised first, with the
+    /// checkpoint's observation.mean and observation.std) and of the action it writes (each clipped
+    /// to [-1, 1]), in order, on the robot (`--model`). What a network trained elsewhere must
+    /// match. Example: rally checkpoint spec --method kmac --json
+    Spec {
+        /// kmac (Diff-Muscle's joint targets), muscle (Muscle-PPO: every muscle's control),
+        /// muscle-pd (muscle-length targets) or dynsyn (synergy weights).
+        #[arg(long)]
+        method: String,
+        /// `rally train`'s configuration whose [controller] section the method uses (default: its
+        /// built-in defaults, as `rally train` without --config).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// As JSON: {model, method, normalised, observation: [names], action: [names]}.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Wrap an ONNX network trained elsewhere (observation batch -> action batch, float32, shapes
+    /// as `rally checkpoint spec` names them) in a checkpoint the server and `rally eval` accept,
+    /// validated first (graph, widths, what it may allocate). It plays the network's output as the
+    /// mean action, without noise.
+    /// Example: rally checkpoint from-onnx policy.onnx --method kmac --obs-norm norm.json --name mine --out mine.json
+    FromOnnx {
+        /// The ONNX file.
+        file: PathBuf,
+        /// The method whose controller turns its actions into muscle controls (see `spec`).
+        #[arg(long)]
+        method: String,
+        /// `rally train`'s configuration whose [controller] section to use (gains, K-MAC's
+        /// activation clamp, grip floor; default: the built-in defaults).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// JSON {"mean": [...], "std": [...]} applied to the observation before the network, as
+        /// (x - mean) / std (default: none, mean 0 and std 1).
+        #[arg(long)]
+        obs_norm: Option<PathBuf>,
+        /// The name stored in the checkpoint (and the agent's on the server).
+        #[arg(long)]
+        name: String,
+        /// Where to write it (default: standard output).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Check a checkpoint against the robot (`--model`); prints its shape, or the field that is wrong.
     Validate {
@@ -121,6 +167,29 @@ pub fn run(args: &CheckpointArgs) -> Result<(), CliError> {
             name,
         } => template(&model, controller, hidden, *activation, name),
         CheckpointCommand::Validate { file } => validate(&model, file),
+        CheckpointCommand::Spec {
+            method,
+            config,
+            json,
+        } => onnx::spec(&model, method, config.as_deref(), *json),
+        CheckpointCommand::FromOnnx {
+            file,
+            method,
+            config,
+            obs_norm,
+            name,
+            out,
+        } => onnx::from_onnx(
+            &model,
+            &onnx::FromOnnx {
+                file,
+                method,
+                config: config.as_deref(),
+                obs_norm: obs_norm.as_deref(),
+                name,
+                out: out.as_ref(),
+            },
+        ),
         CheckpointCommand::ScaleNoise {
             file,
             factor,
