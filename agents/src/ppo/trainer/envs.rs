@@ -11,29 +11,38 @@ use crate::observation::ObsBlock;
 use crate::ppo::{TrainConfig, TrainEnv};
 
 /// A training environment: a single serve (one robot) or a self-play rally (two).
-pub(super) enum TrainingEnv {
+pub enum TrainingEnv {
+    /// One robot returns one serve.
     Single(Box<Env>),
+    /// Two robots rally, the policy playing both.
     Rally(Box<RallyEnv>),
 }
 
 /// What one robot's step gave.
-pub(super) struct AgentStep {
-    pub(super) reward: f64,
-    pub(super) done: bool,
+pub struct AgentStep {
+    /// The weighted reward (before the run's `reward_scale`).
+    pub reward: f64,
+    /// The episode is over.
+    pub done: bool,
     /// The episode reached its time limit (or cap) rather than a terminal state.
-    pub(super) time_limit: bool,
-    pub(super) hit: bool,
-    pub(super) success: bool,
-    pub(super) rally_length: u32,
-    pub(super) dual: f64,
+    pub time_limit: bool,
+    /// The robot has touched the ball (so far).
+    pub hit: bool,
+    /// A legal return (so far; in a rally: by this robot in this step).
+    pub success: bool,
+    /// Returns in the rally so far (single serve: 1 after a success).
+    pub rally_length: u32,
+    /// The rally's dual term of this step.
+    pub dual: f64,
     /// The position term, while the robot tracks a command before contact.
-    pub(super) tracking: Option<f64>,
+    pub tracking: Option<f64>,
     /// ‖a‖₁/n_a after the step.
-    pub(super) activation: f64,
+    pub activation: f64,
 }
 
 impl TrainingEnv {
-    pub(super) fn reset(&mut self, seed: u64) {
+    /// A new episode from `seed`.
+    pub fn reset(&mut self, seed: u64) {
         match self {
             TrainingEnv::Single(e) => {
                 e.reset(seed);
@@ -42,7 +51,8 @@ impl TrainingEnv {
         }
     }
 
-    pub(super) fn observe_into(&self, out: &mut Vec<f64>) {
+    /// Appends every robot's observation to `out`, robot by robot.
+    pub fn observe_into(&self, out: &mut Vec<f64>) {
         match self {
             TrainingEnv::Single(e) => out.extend_from_slice(e.observation()),
             TrainingEnv::Rally(e) => {
@@ -53,7 +63,7 @@ impl TrainingEnv {
     }
 
     /// One control step with the rows of `actions` (one per robot).
-    pub(super) fn step(&mut self, actions: &[Vec<f64>]) -> Vec<AgentStep> {
+    pub fn step(&mut self, actions: &[Vec<f64>]) -> Vec<AgentStep> {
         match self {
             TrainingEnv::Single(env) => {
                 let tr = env.step(&actions[0]);
@@ -98,7 +108,7 @@ impl TrainingEnv {
 }
 
 /// The ball bank `[bank] file` names, read once for every environment; `None` without a file.
-pub(super) fn read_bank(config: &TrainConfig) -> Result<Option<crate::env::BallBank>, String> {
+pub fn read_bank(config: &TrainConfig) -> Result<Option<crate::env::BallBank>, String> {
     let Some(file) = &config.bank.file else {
         return Ok(None);
     };
@@ -111,7 +121,7 @@ pub(super) fn read_bank(config: &TrainConfig) -> Result<Option<crate::env::BallB
 }
 
 /// The training environment a method runs in; its observation and action sizes.
-pub(super) fn make_env(
+pub fn make_env(
     model: &Arc<Model>,
     arena: &ArenaConfig,
     controller: &ControllerSpec,

@@ -12,7 +12,7 @@
 //! environments' running episodes), [`progress`] (statistics, curve, validations), `envs` (the
 //! environments a run steps), `outputs` (validation, checkpoints, the bank).
 
-mod envs;
+pub mod envs;
 mod outputs;
 pub mod progress;
 mod rollout;

@@ -1,0 +1,145 @@
+"""The gymnasium faces of the Rust environments: one robot returning serves (``SingleServeEnv``) and
+many of them stepped together in Rust (``SingleServeVectorEnv``).
+
+Both sit on ``muscle_rally._core.VecEnv``: the environments ``rally train`` steps (its reward, its
+episode ends, its controllers), built from a method and a ``rally train`` configuration file. An
+episode seeded ``s`` here is the episode ``rally train`` plays from seed ``s``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+
+from ._core import VecEnv as _Core
+
+METHODS = ("kmac", "muscle", "muscle-pd", "dynsyn")
+SERVES = ("p2", "rally", "stroke")
+_SEED_SPAN = 2**63
+
+
+def _core(method: str, num_envs: int, model: str, config, serve: str, env: str) -> _Core:
+    if method not in METHODS:
+        raise ValueError(f"method: '{method}': one of {', '.join(METHODS)}")
+    if serve not in SERVES:
+        raise ValueError(f"serve: '{serve}': one of {', '.join(SERVES)}")
+    if not isinstance(num_envs, int) or num_envs < 1:
+        raise ValueError(f"num_envs: {num_envs!r}: a positive integer")
+    return _Core(method, num_envs, model, None if config is None else str(config), serve, env)
+
+
+class _Buffers:
+    """The arrays the Rust side writes into, allocated once."""
+
+    def __init__(self, core: _Core):
+        rows = core.num_envs * core.agents
+        self.obs = np.zeros((rows, core.obs_dim), dtype=np.float64)
+        self.rewards = np.zeros(rows, dtype=np.float64)
+        self.terminated = np.zeros(rows, dtype=np.bool_)
+        self.truncated = np.zeros(rows, dtype=np.bool_)
+        self.hit = np.zeros(rows, dtype=np.bool_)
+        self.success = np.zeros(rows, dtype=np.bool_)
+
+    def step(self, core: _Core, actions: np.ndarray) -> None:
+        core.step(actions, self.obs, self.rewards, self.terminated, self.truncated, self.hit,
+                  self.success)
+
+
+def _actions(action: Any, rows: int, width: int) -> np.ndarray:
+    a = np.ascontiguousarray(action, dtype=np.float64)
+    if a.size != rows * width:
+        raise ValueError(f"action: {a.shape} given; {rows} x {width} entries expected")
+    return a.reshape(rows, width)
+
+
+class SingleServeEnv(gym.Env):
+    """One robot, one serve, one stroke: the paper's single-serve task (its §IV-B).
+
+    Observation: ``obs_dim`` float64 entries named by ``observation_names`` (joint angles and
+    velocities, activations, muscle lengths, ball, paddle, the planner's command); not normalised.
+    Action: ``act_dim`` entries in [-1, 1] named by ``action_names``, turned into muscle controls by
+    the method's controller (K-MAC: joint targets; Muscle-PPO: every muscle's control; Muscle-PD:
+    muscle-length targets; DynSyn: synergy weights). ``info``: ``hit`` and ``success`` (so far).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, method: str = "kmac", serve: str = "p2", model: str = "default",
+                 config: Optional[str] = None):
+        self._core = _core(method, 1, model, config, serve, "single")
+        self._buf = _Buffers(self._core)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (self._core.obs_dim,), np.float64)
+        self.action_space = spaces.Box(-1.0, 1.0, (self._core.act_dim,), np.float64)
+        self.observation_names = list(self._core.observation_names)
+        self.action_names = list(self._core.action_names)
+        self.method, self.model = self._core.method, self._core.model
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        super().reset(seed=seed)
+        episode = seed if seed is not None else int(self.np_random.integers(_SEED_SPAN))
+        if not 0 <= episode < 2**64:
+            raise ValueError(f"seed: {seed}: 0 <= seed < 2**64")
+        self._core.reset(0, episode, self._buf.obs)
+        return self._buf.obs[0].copy(), {"seed": episode}
+
+    def step(self, action):
+        self._buf.step(self._core, _actions(action, 1, self._core.act_dim))
+        b = self._buf
+        info = {"hit": bool(b.hit[0]), "success": bool(b.success[0])}
+        return (b.obs[0].copy(), float(b.rewards[0]), bool(b.terminated[0]),
+                bool(b.truncated[0]), info)
+
+
+class SingleServeVectorEnv(VectorEnv):
+    """``num_envs`` single-serve environments stepped together in Rust, on every core, with the GIL
+    released. Autoreset in the same step (gymnasium's ``AutoresetMode.SAME_STEP``): an episode that
+    ends is followed at once by the next, whose first observation is returned; the last one is in
+    ``infos["final_obs"]`` (rows where ``infos["_final_obs"]`` is true). Episode seeds: ``seed + i``
+    for environment ``i`` at ``reset(seed=...)``, then drawn from the vector's own generator.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.SAME_STEP}
+
+    def __init__(self, method: str = "kmac", num_envs: int = 16, serve: str = "p2",
+                 model: str = "default", config: Optional[str] = None):
+        self._core = _core(method, num_envs, model, config, serve, "single")
+        self._buf = _Buffers(self._core)
+        self.num_envs = num_envs
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (self._core.obs_dim,),
+                                                   np.float64)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (self._core.act_dim,), np.float64)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space,
+                                                              num_envs)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+        self.observation_names = list(self._core.observation_names)
+        self.action_names = list(self._core.action_names)
+        self._rng = np.random.default_rng()
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+            seeds = [seed + i for i in range(self.num_envs)]
+        else:
+            seeds = [int(s) for s in self._rng.integers(_SEED_SPAN, size=self.num_envs)]
+        for i, s in enumerate(seeds):
+            self._core.reset(i, s, self._buf.obs[i:i + 1])
+        return self._buf.obs.copy(), {"seed": np.array(seeds, dtype=np.uint64)}
+
+    def step(self, actions):
+        b = self._buf
+        b.step(self._core, _actions(actions, self.num_envs, self._core.act_dim))
+        obs = b.obs.copy()
+        infos: dict[str, Any] = {"hit": b.hit.copy(), "success": b.success.copy()}
+        done = b.terminated | b.truncated
+        if done.any():
+            infos["final_obs"] = np.where(done[:, None], obs, 0.0)
+            infos["_final_obs"] = done.copy()
+            for i in np.flatnonzero(done):
+                self._core.reset(int(i), int(self._rng.integers(_SEED_SPAN)),
+                                 b.obs[i:i + 1])
+                obs[i] = b.obs[i]
+        return obs, b.rewards.copy(), b.terminated.copy(), b.truncated.copy(), infos

@@ -1,0 +1,117 @@
+"""The package against gymnasium's checker, the Rust side's recorded trajectory and bad input."""
+
+import json
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import muscle_rally as mr
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+TRAJECTORY = ROOT / "agents" / "tests" / "fixtures" / "vecenv_trajectory.json"
+
+
+def bits_sum(x: np.ndarray) -> int:
+    """The wrapping sum of the float64 bit patterns, as agents/tests/vecenv.rs computes it."""
+    return int(np.ascontiguousarray(x, dtype=np.float64).view(np.uint64).sum(dtype=np.uint64))
+
+
+def test_gymnasiums_checker_passes_for_every_method():
+    for method in mr.METHODS:
+        env = mr.make("SingleServe-v0", method=method)
+        check_env(env, skip_render_check=True)
+        assert len(env.observation_names) == env.observation_space.shape[0]
+        assert len(env.action_names) == env.action_space.shape[0]
+
+
+def test_registered_with_gymnasium():
+    env = gym.make("muscle_rally/SingleServe-v0", method="muscle-pd")
+    obs, _ = env.reset(seed=1)
+    assert obs.shape == env.observation_space.shape
+
+
+def test_the_same_seed_is_the_rust_sides_trajectory_bit_for_bit():
+    rec = json.loads(TRAJECTORY.read_text())
+    env = mr.make("SingleServe-v0", method=rec["method"], model=rec["model"])
+    obs, info = env.reset(seed=rec["seed"])
+    assert info["seed"] == rec["seed"]
+    sums, rewards, ended = [bits_sum(obs)], [], None
+    width = env.action_space.shape[0]
+    for k in range(rec["steps"]):
+        a = np.array([((k * 7 + j * 3) % 11) / 5.5 - 1.0 for j in range(width)])
+        obs, r, term, trunc, _ = env.step(a)
+        sums.append(bits_sum(obs))
+        rewards.append(r)
+        if ended is None and (term or trunc):
+            ended = k
+    assert sums == rec["obs_bits_sum"]
+    assert [np.float64(r).tobytes() for r in rewards] == \
+        [np.float64(r).tobytes() for r in rec["rewards"]]
+    assert ended == rec["ended_at"]
+
+
+def test_the_vector_env_steps_every_environment_as_a_single_one_would():
+    vec = mr.make_vec("SingleServe-v0", num_envs=4, method="kmac")
+    obs, info = vec.reset(seed=10)
+    assert obs.shape == (4, 206) and list(info["seed"]) == [10, 11, 12, 13]
+    single = mr.make("SingleServe-v0", method="kmac")
+    one, _ = single.reset(seed=12)
+    np.testing.assert_array_equal(obs[2], one)
+    rng = np.random.default_rng(0)
+    episodes_ended = 0
+    for _ in range(60):
+        a = rng.uniform(-1, 1, size=(4, 13))
+        obs, r, term, trunc, infos = vec.step(a)
+        if episodes_ended == 0:
+            o1, r1, t1, u1, _ = single.step(a[2])
+            np.testing.assert_array_equal(obs[2] if not (t1 or u1) else infos["final_obs"][2], o1)
+            assert r[2] == r1
+        done = term | trunc
+        if done.any():
+            episodes_ended += int(done.sum())
+            assert infos["_final_obs"].tolist() == done.tolist()
+    assert obs.shape == (4, 206) and np.isfinite(obs).all()
+
+
+def test_bad_arguments_raise_with_the_argument_named():
+    with pytest.raises(ValueError, match="method"):
+        mr.make("SingleServe-v0", method="ppo")
+    with pytest.raises(ValueError, match="serve"):
+        mr.make("SingleServe-v0", serve="lob")
+    with pytest.raises(ValueError, match="num_envs"):
+        mr.make_vec("SingleServe-v0", num_envs=0)
+    with pytest.raises(ValueError, match="env_id"):
+        mr.make("Tennis-v0")
+    with pytest.raises(ValueError, match="model"):
+        mr.make("SingleServe-v0", model="/nonexistent/robot.xml")
+    with pytest.raises(ValueError, match="config"):
+        mr.make("SingleServe-v0", config="/nonexistent/train.toml")
+    env = mr.make("SingleServe-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action"):
+        env.step(np.zeros(3))
+    # A non-finite action ends the episode (the rules' invalid action), it does not raise.
+    _, r, term, _, _ = env.step(np.full(13, np.nan))
+    assert term and r == 0.0
+
+
+def test_the_rally_passes_pettingzoos_parallel_api_test():
+    from pettingzoo.test import parallel_api_test
+
+    env = mr.rally.parallel_env(method="kmac")
+    parallel_api_test(env, num_cycles=200)
+    obs, infos = env.reset(seed=3)
+    assert set(obs) == {"a", "b"} and obs["a"].shape == (206,)
+    # Each robot observes in its own frame: the two observations differ.
+    assert not np.array_equal(obs["a"], obs["b"])
+    steps = 0
+    while env.agents:
+        obs, rewards, terms, truncs, infos = env.step({a: np.zeros(13) for a in env.agents})
+        steps += 1
+    assert steps > 10 and (any(terms.values()) or any(truncs.values()))
+    with pytest.raises(ValueError, match="actions"):
+        env.reset(seed=3)
+        env.step({"a": np.zeros(13)})
