@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from ._core import __version__
+from ._core import __version__, checkpoint_from_onnx
 from .envs import METHODS, SERVES, SingleServeEnv, SingleServeVectorEnv
 
 def __getattr__(name):
@@ -26,8 +26,8 @@ def __getattr__(name):
     raise AttributeError(name)
 
 
-__all__ = ["make", "make_vec", "SingleServeEnv", "SingleServeVectorEnv", "METHODS", "SERVES",
-           "__version__"]
+__all__ = ["make", "make_vec", "checkpoint_from_onnx", "SingleServeEnv", "SingleServeVectorEnv",
+           "METHODS", "SERVES", "__version__"]
 
 _ENVS = {"SingleServe-v0": (SingleServeEnv, SingleServeVectorEnv)}
 

@@ -252,9 +252,46 @@ impl VecEnv {
     }
 }
 
+/// A checkpoint (its JSON text) around an ONNX network trained elsewhere, as `rally checkpoint
+/// from-onnx` writes it: `method`'s controller (gains, K-MAC's clamp and the grip floor from
+/// `config`, a `rally train` configuration file, or its defaults), `obs_mean` and `obs_std` applied
+/// before the network (both or neither), validated against the robot `model` first.
+#[pyfunction]
+#[pyo3(signature = (onnx, method, name, model="default", obs_mean=None, obs_std=None, config=None))]
+fn checkpoint_from_onnx(
+    onnx: &[u8],
+    method: &str,
+    name: &str,
+    model: &str,
+    obs_mean: Option<Vec<f64>>,
+    obs_std: Option<Vec<f64>>,
+    config: Option<PathBuf>,
+) -> PyResult<String> {
+    let m: Method = method.parse().map_err(|e| bad("method", e))?;
+    let c = configuration(config, None, None)?;
+    let (body, _) = robot(model)?;
+    let norm = match (obs_mean, obs_std) {
+        (None, None) => None,
+        (Some(mean), Some(std)) => Some((mean, std)),
+        _ => return Err(bad("obs_mean", "give obs_mean and obs_std together")),
+    };
+    let grip = (c.controller.grip_floor > 0.0).then_some(c.controller.grip_floor);
+    let ck = agents::checkpoint::Checkpoint::from_onnx(
+        &body,
+        name,
+        c.controller(m, &body),
+        onnx,
+        norm,
+        grip,
+    )
+    .map_err(|e| bad(&e.field, &e.message))?;
+    serde_json::to_string(&ck).map_err(|e| bad("checkpoint", e))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;
+    m.add_function(wrap_pyfunction!(checkpoint_from_onnx, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

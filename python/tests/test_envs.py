@@ -115,3 +115,52 @@ def test_the_rally_passes_pettingzoos_parallel_api_test():
     with pytest.raises(ValueError, match="actions"):
         env.reset(seed=3)
         env.step({"a": np.zeros(13)})
+
+
+def mlp_onnx(weights, activation="Tanh") -> bytes:
+    """An MLP as PyTorch exports one (Gemm with transposed weights, then the activation), built
+    with the onnx package from numpy weights: [(W, b), ...], W of shape (out, in)."""
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    nodes, inits, x = [], [], "obs"
+    for k, (w, b) in enumerate(weights):
+        inits += [numpy_helper.from_array(w.astype(np.float32), f"w{k}"),
+                  numpy_helper.from_array(b.astype(np.float32), f"b{k}")]
+        y = f"h{k}" if k + 1 < len(weights) else "act"
+        pre = f"z{k}" if k + 1 < len(weights) else y
+        nodes.append(helper.make_node("Gemm", [x, f"w{k}", f"b{k}"], [pre], transB=1))
+        if k + 1 < len(weights):
+            nodes.append(helper.make_node(activation, [pre], [y]))
+        x = y
+    n_in, n_out = weights[0][0].shape[1], weights[-1][0].shape[0]
+    graph = helper.make_graph(
+        nodes, "policy",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["batch", n_in])],
+        [helper.make_tensor_value_info("act", TensorProto.FLOAT, ["batch", n_out])], inits)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    onnx.checker.check_model(model)
+    return model.SerializeToString()
+
+
+def test_an_onnx_network_from_numpy_weights_becomes_a_checkpoint():
+    pytest.importorskip("onnx")
+    rng = np.random.default_rng(1)
+    w = [(rng.normal(0, 0.1, (32, 206)), np.zeros(32)), (rng.normal(0, 0.1, (13, 32)), np.zeros(13))]
+    mean, std = list(rng.normal(0, 1, 206)), list(rng.uniform(0.5, 2, 206))
+    text = mr.checkpoint_from_onnx(mlp_onnx(w), method="kmac", name="mine", obs_mean=mean,
+                                   obs_std=std)
+    c = json.loads(text)
+    assert c["name"] == "mine" and c["model"] == "default"
+    assert c["controller"]["kind"] == "kmac" and "onnx" in c and "policy" not in c
+    assert c["observation"]["mean"] == mean and c["observation"]["std"] == std
+    # The network's width is the method's: Muscle-PPO's controller wants another.
+    with pytest.raises(ValueError, match="onnx"):
+        mr.checkpoint_from_onnx(mlp_onnx(w), method="muscle", name="x")
+    with pytest.raises(ValueError, match="obs_mean"):
+        mr.checkpoint_from_onnx(mlp_onnx(w), method="kmac", name="x", obs_mean=mean)
+    with pytest.raises(ValueError, match="observation"):
+        mr.checkpoint_from_onnx(mlp_onnx(w), method="kmac", name="x", obs_mean=[0.0],
+                                obs_std=[1.0])
+    with pytest.raises(ValueError, match="onnx"):
+        mr.checkpoint_from_onnx(b"not a network", method="kmac", name="x")
