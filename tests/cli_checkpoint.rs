@@ -81,8 +81,32 @@ fn from_onnx_writes_a_checkpoint_that_validates_and_plays() {
     assert_eq!(c["observation"]["std"][0], 2.0);
     assert!(c["onnx"].is_object() && c["policy"].is_null());
     assert!(rally(&["checkpoint", "validate", o]).status.success());
-    let ev = rally(&["eval", o, "--episodes", "2", "--json"]);
+    let trace = dir.join("steps.jsonl");
+    let t = trace.to_str().unwrap();
+    let ev = rally(&["eval", o, "--episodes", "2", "--json", "--trace", t]);
     assert!(ev.status.success(), "{}", stderr(&ev));
+    // Every control step of both episodes, in order: what the network read and wrote.
+    let steps: Vec<serde_json::Value> = std::fs::read_to_string(&trace)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let first_of_second = steps.iter().position(|s| s["episode"] == 1).unwrap();
+    assert!(first_of_second > 10, "{first_of_second} steps in episode 0");
+    for (k, s) in steps.iter().enumerate() {
+        let step = if k < first_of_second {
+            k
+        } else {
+            k - first_of_second
+        };
+        assert_eq!(s["step"], step);
+        assert_eq!(s["observation"].as_array().unwrap().len(), 206);
+        assert_eq!(s["action"].as_array().unwrap().len(), 13);
+        assert!(!s["controls"].as_array().unwrap().is_empty());
+    }
+    let many = rally(&["eval", o, "--episodes", "101", "--trace", t]);
+    assert_eq!(many.status.code(), Some(2));
+    assert!(stderr(&many).contains("--trace"), "{}", stderr(&many));
     // Standard output without --out: the same checkpoint.
     let printed = rally(&args[..args.len() - 2]);
     assert!(printed.status.success());

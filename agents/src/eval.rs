@@ -165,8 +165,37 @@ pub fn play_episode(
     play_reset_episode(env, player)
 }
 
+/// One control step of a traced episode: what the player saw and decided.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TraceStep {
+    /// The episode's index in the evaluation.
+    pub episode: usize,
+    /// The control step's index in the episode.
+    pub step: usize,
+    /// The arena's time at the decision, s.
+    pub time: f64,
+    /// The observation the network was given, before the checkpoint's normalisation (empty for a
+    /// player without a network).
+    pub observation: Vec<f64>,
+    /// The network's output: the mean action, before any noise and the controller (empty for a
+    /// player without a network).
+    pub action: Vec<f64>,
+    /// The muscle controls the player wrote (every actuator of the robot).
+    pub controls: Vec<f64>,
+}
+
 /// Plays the episode `env` was just reset to (any serve, e.g. a bank ball) with `player`.
 pub fn play_reset_episode(env: &mut SingleServe, player: &mut dyn Player) -> EpisodeResult {
+    play_traced(env, player, None)
+}
+
+/// [`play_reset_episode`], appending every control step to `trace` when given (episode index 0:
+/// the caller renumbers).
+pub fn play_traced(
+    env: &mut SingleServe,
+    player: &mut dyn Player,
+    mut trace: Option<&mut Vec<TraceStep>>,
+) -> EpisodeResult {
     player.reset();
     let model = env.robot.held_model().clone();
     let muscles: Vec<usize> = model.muscles().map(|(i, _)| i).collect();
@@ -181,6 +210,20 @@ pub fn play_reset_episode(env: &mut SingleServe, player: &mut dyn Player) -> Epi
             .act(&env.robot, &env.world.ball, env.world.time, &mut ctrl)
             .is_ok()
             && ctrl.iter().all(|c| c.is_finite());
+        if let Some(t) = trace.as_deref_mut() {
+            let (observation, action) = player
+                .last_decision()
+                .map(|(o, a)| (o.to_vec(), a.to_vec()))
+                .unwrap_or_default();
+            t.push(TraceStep {
+                episode: 0,
+                step: steps,
+                time: env.world.time,
+                observation,
+                action,
+                controls: ctrl.clone(),
+            });
+        }
         if !ok {
             env.invalid_action();
             break;
@@ -237,6 +280,18 @@ pub fn evaluate(
     spec: &PlayerSpec,
     progress: &(dyn Fn() + Sync),
 ) -> Result<EvalReport, String> {
+    evaluate_traced(e, spec, progress, false).map(|(report, _)| report)
+}
+
+/// [`evaluate`], with every episode's control steps when `trace` (in episode order; empty
+/// otherwise). A step's trace holds the observation, so a trace takes about 1.5 MB an episode on the
+/// built-in robot and 5 MB on MyoSuite's.
+pub fn evaluate_traced(
+    e: &Evaluation,
+    spec: &PlayerSpec,
+    progress: &(dyn Fn() + Sync),
+    trace: bool,
+) -> Result<(EvalReport, Vec<TraceStep>), String> {
     let (model, config, preset, kind, episodes, seed) = (
         e.model.clone(),
         &e.config,
@@ -251,7 +306,7 @@ pub fn evaluate(
     // One environment and one player per worker (an ONNX player prepares its network once), the
     // workers taking the next episode index as they finish one; each episode reseeds the player, so
     // results do not depend on which worker played it.
-    let results: Vec<EpisodeResult> = crate::seeds::par_indexed(
+    let played: Vec<(EpisodeResult, Vec<TraceStep>)> = crate::seeds::par_indexed(
         episodes,
         || {
             (
@@ -262,11 +317,17 @@ pub fn evaluate(
         |(env, player), i| {
             let (serve_seed, agent_seed) = episode_seeds(seed, i);
             player.reseed(agent_seed);
-            let r = play_episode(env, player.as_mut(), kind, serve_seed);
+            env.reset(kind, &mut Rng::seeded(serve_seed), None);
+            let mut steps = Vec::new();
+            let r = play_traced(env, player.as_mut(), trace.then_some(&mut steps));
+            for s in &mut steps {
+                s.episode = i;
+            }
             progress();
-            r
+            (r, steps)
         },
     );
+    let (results, traces): (Vec<EpisodeResult>, Vec<Vec<TraceStep>>) = played.into_iter().unzip();
     let hits = results.iter().filter(|r| r.hit).count();
     let wins = results.iter().filter(|r| r.success).count();
     let mut ends: Vec<(String, usize)> = Vec::new();
@@ -277,7 +338,7 @@ pub fn evaluate(
         }
     }
     ends.sort();
-    Ok(EvalReport {
+    let report = EvalReport {
         agent: spec.name(),
         serve: match kind {
             ServeKind::P0 => "p0",
@@ -315,7 +376,8 @@ pub fn evaluate(
                 / results.iter().map(|r| r.steps).sum::<usize>().max(1) as f64,
         ),
         ends,
-    })
+    };
+    Ok((report, traces.into_iter().flatten().collect()))
 }
 
 #[cfg(test)]

@@ -32,6 +32,21 @@ pub enum PlayerSpec {
 }
 
 impl PlayerSpec {
+    /// The same player without the Gaussian noise a trained checkpoint was trained with
+    /// (`policy_std`): it plays its network's mean action (named "… (mean action)"). A scripted
+    /// player is unchanged.
+    pub fn mean_action(self) -> PlayerSpec {
+        match self {
+            PlayerSpec::Checkpoint(c) => {
+                let mut c = (*c).clone();
+                c.policy_std = None;
+                c.name = format!("{} (mean action)", c.name);
+                PlayerSpec::Checkpoint(std::sync::Arc::new(c))
+            }
+            other => other,
+        }
+    }
+
     /// A scripted variant's name, a built-in checkpoint's name of `model`'s robot (`kmac`,
     /// `kmac-rally`, …: compiled into the binary, found from any directory), or else a checkpoint file to read (through
     /// `read`) and validate.

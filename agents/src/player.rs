@@ -26,4 +26,11 @@ pub trait Player: Send {
         t: f64,
         ctrl: &mut [f64],
     ) -> Result<(), InvalidAction>;
+
+    /// What a network decided at the last `act`: the observation it was given (before the
+    /// checkpoint's normalisation) and its output (the mean action, before any noise). `None` for
+    /// players without a network.
+    fn last_decision(&self) -> Option<(&[f64], &[f64])> {
+        None
+    }
 }

@@ -34,6 +34,9 @@ pub struct StepResult {
     pub success: bool,
     /// Returns in the rally so far.
     pub rally_length: u32,
+    /// What each reward term added to `reward`, named by [`crate::env::RewardTerms::NAMES`] (they
+    /// sum to `reward`).
+    pub terms: [f64; 13],
 }
 
 /// `n` environments of one method on one robot.
@@ -182,6 +185,7 @@ impl VecEnv {
                             hit: s.hit,
                             success: s.success,
                             rally_length: s.rally_length,
+                            terms: s.terms,
                         };
                     }
                     *over = r.iter().any(|x| x.terminated || x.truncated);
@@ -229,6 +233,12 @@ mod tests {
         for _ in 0..400 {
             v.step(&vec![0.0; n * ad], &mut obs, &mut results).unwrap();
             rewards.push(results[0].reward);
+            let sum = results[0].terms.iter().fold(0.0, |s, x| s + x);
+            assert_eq!(
+                sum.to_bits(),
+                results[0].reward.to_bits(),
+                "the terms add up"
+            );
             if results[0].terminated || results[0].truncated {
                 break;
             }

@@ -4,6 +4,7 @@
     env = muscle_rally.make("SingleServe-v0", method="kmac")           # a gymnasium.Env
     envs = muscle_rally.make_vec("SingleServe-v0", num_envs=64)         # a gymnasium VectorEnv
     rally = muscle_rally.rally.parallel_env(method="kmac")             # a PettingZoo ParallelEnv
+    report = muscle_rally.evaluate("mine.json", episodes=1000, seed=7)  # rally eval's numbers
 
 The environments are the ones ``rally train`` steps (same reward, episode ends and controllers; the
 same seed gives the same episode). Also registered with gymnasium: ``gymnasium.make("muscle_rally/
@@ -12,8 +13,14 @@ SingleServe-v0", method=...)``.
 
 from __future__ import annotations
 
-import gymnasium as gym
+import json
+import os
+from typing import Any
 
+import gymnasium as gym
+import numpy as np
+
+from . import _core
 from ._core import __version__, checkpoint_from_onnx
 from .envs import METHODS, SERVES, SingleServeEnv, SingleServeVectorEnv
 
@@ -26,7 +33,7 @@ def __getattr__(name):
     raise AttributeError(name)
 
 
-__all__ = ["make", "make_vec", "checkpoint_from_onnx", "SingleServeEnv", "SingleServeVectorEnv",
+__all__ = ["make", "make_vec", "evaluate", "checkpoint_from_onnx", "SingleServeEnv", "SingleServeVectorEnv",
            "METHODS", "SERVES", "__version__"]
 
 _ENVS = {"SingleServe-v0": (SingleServeEnv, SingleServeVectorEnv)}
@@ -53,3 +60,33 @@ def make_vec(env_id: str = "SingleServe-v0", num_envs: int = 16, **kwargs):
 
 if "muscle_rally/SingleServe-v0" not in gym.registry:
     gym.register(id="muscle_rally/SingleServe-v0", entry_point="muscle_rally.envs:SingleServeEnv")
+
+
+def evaluate(agent: str | os.PathLike, episodes: int = 100, seed: int = 0, serve: str = "p2",
+             model: str = "default", mean_action: bool = False, trace: bool = False
+             ) -> dict[str, Any]:
+    """``rally eval``, from Python (the same Rust function): ``agent`` (a scripted variant, a
+    built-in checkpoint's name or a checkpoint file) on ``episodes`` single serves of ``serve`` from
+    ``seed``, on every core. Returns ``rally eval --json``'s report (hit and success rates, effort,
+    mean activation, each with its 95% interval). With ``trace`` (at most 100 episodes),
+    ``report["trace"]`` holds every control step as arrays: ``episode``, ``step``, ``time``, the
+    ``observation`` the network was given (before the checkpoint's normalisation), its ``action``
+    (the mean, before noise and the controller) and the muscle ``controls``."""
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes: {episodes!r}: a positive integer")
+    if not isinstance(seed, int) or not 0 <= seed < 2**64:
+        raise ValueError(f"seed: {seed!r}: 0 <= seed < 2**64")
+    text, steps = _core.evaluate(os.fspath(agent), episodes, seed, serve, model, bool(mean_action),
+                                 bool(trace))
+    report = json.loads(text)
+    if trace:
+        cols = list(zip(*steps)) if steps else [()] * 6
+        report["trace"] = {
+            "episode": np.array(cols[0], dtype=np.int64),
+            "step": np.array(cols[1], dtype=np.int64),
+            "time": np.array(cols[2], dtype=np.float64),
+            "observation": np.array(cols[3], dtype=np.float64),
+            "action": np.array(cols[4], dtype=np.float64),
+            "controls": np.array(cols[5], dtype=np.float64),
+        }
+    return report

@@ -43,10 +43,16 @@ class _Buffers:
         self.truncated = np.zeros(rows, dtype=np.bool_)
         self.hit = np.zeros(rows, dtype=np.bool_)
         self.success = np.zeros(rows, dtype=np.bool_)
+        self.term_names = list(core.reward_term_names)
+        self.terms = np.zeros((rows, len(self.term_names)), dtype=np.float64)
 
     def step(self, core: _Core, actions: np.ndarray) -> None:
         core.step(actions, self.obs, self.rewards, self.terminated, self.truncated, self.hit,
-                  self.success)
+                  self.success, self.terms)
+
+    def reward_terms(self, row: int) -> dict[str, float]:
+        """What each reward term added to row ``row``'s reward (they sum to it)."""
+        return {n: float(x) for n, x in zip(self.term_names, self.terms[row])}
 
 
 def _actions(action: Any, rows: int, width: int) -> np.ndarray:
@@ -63,7 +69,9 @@ class SingleServeEnv(gym.Env):
     velocities, activations, muscle lengths, ball, paddle, the planner's command); not normalised.
     Action: ``act_dim`` entries in [-1, 1] named by ``action_names``, turned into muscle controls by
     the method's controller (K-MAC: joint targets; Muscle-PPO: every muscle's control; Muscle-PD:
-    muscle-length targets; DynSyn: synergy weights). ``info``: ``hit`` and ``success`` (so far).
+    muscle-length targets; DynSyn: synergy weights). ``info``: ``hit`` and ``success`` (so far) and
+    ``reward_terms``, what each of the reward's terms (``reward_term_names``, the ``[reward]`` keys
+    of a ``rally train`` configuration) added to the step's reward, weighted: they sum to it.
     """
 
     metadata = {"render_modes": []}
@@ -76,6 +84,7 @@ class SingleServeEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, (self._core.act_dim,), np.float64)
         self.observation_names = list(self._core.observation_names)
         self.action_names = list(self._core.action_names)
+        self.reward_term_names = list(self._core.reward_term_names)
         self.method, self.model = self._core.method, self._core.model
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
@@ -89,7 +98,8 @@ class SingleServeEnv(gym.Env):
     def step(self, action):
         self._buf.step(self._core, _actions(action, 1, self._core.act_dim))
         b = self._buf
-        info = {"hit": bool(b.hit[0]), "success": bool(b.success[0])}
+        info = {"hit": bool(b.hit[0]), "success": bool(b.success[0]),
+                "reward_terms": b.reward_terms(0)}
         return (b.obs[0].copy(), float(b.rewards[0]), bool(b.terminated[0]),
                 bool(b.truncated[0]), info)
 
@@ -100,6 +110,8 @@ class SingleServeVectorEnv(VectorEnv):
     ends is followed at once by the next, whose first observation is returned; the last one is in
     ``infos["final_obs"]`` (rows where ``infos["_final_obs"]`` is true). Episode seeds: ``seed + i``
     for environment ``i`` at ``reset(seed=...)``, then drawn from the vector's own generator.
+    ``infos``: ``hit`` and ``success`` (arrays), ``reward_terms`` (an array per term name: what it
+    added to each environment's reward).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.SAME_STEP}
@@ -117,6 +129,7 @@ class SingleServeVectorEnv(VectorEnv):
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
         self.observation_names = list(self._core.observation_names)
         self.action_names = list(self._core.action_names)
+        self.reward_term_names = list(self._core.reward_term_names)
         self._rng = np.random.default_rng()
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
@@ -133,7 +146,10 @@ class SingleServeVectorEnv(VectorEnv):
         b = self._buf
         b.step(self._core, _actions(actions, self.num_envs, self._core.act_dim))
         obs = b.obs.copy()
-        infos: dict[str, Any] = {"hit": b.hit.copy(), "success": b.success.copy()}
+        infos: dict[str, Any] = {
+            "hit": b.hit.copy(), "success": b.success.copy(),
+            "reward_terms": {n: b.terms[:, k].copy() for k, n in enumerate(b.term_names)},
+        }
         done = b.terminated | b.truncated
         if done.any():
             infos["final_obs"] = np.where(done[:, None], obs, 0.0)

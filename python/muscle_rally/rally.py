@@ -3,7 +3,7 @@ across the table, each observing in its own frame and acting in [-1, 1] through 
 controller; the paper's rally task (its §IV-C). The environment is ``rally train --env rally``'s:
 a rally serve, the rules, the rally reward for each robot. ``infos[agent]``: ``hit`` (this robot
 has touched the ball in the rally's current exchange) and ``success`` (a legal return by this robot
-in this step).
+in this step) and ``reward_terms`` (what each reward term added to its reward).
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ class RallyParallelEnv(ParallelEnv):
         self.action_spaces = {a: act for a in self.possible_agents}
         self.observation_names = list(self._core.observation_names)
         self.action_names = list(self._core.action_names)
+        self.reward_term_names = list(self._core.reward_term_names)
         self._rng = np.random.default_rng()
 
     def observation_space(self, agent):
@@ -63,7 +64,8 @@ class RallyParallelEnv(ParallelEnv):
         rewards = {a: float(b.rewards[i]) for i, a in enumerate(names)}
         terms = {a: bool(b.terminated[i]) for i, a in enumerate(names)}
         truncs = {a: bool(b.truncated[i]) for i, a in enumerate(names)}
-        infos = {a: {"hit": bool(b.hit[i]), "success": bool(b.success[i])}
+        infos = {a: {"hit": bool(b.hit[i]), "success": bool(b.success[i]),
+                     "reward_terms": b.reward_terms(i)}
                  for i, a in enumerate(names)}
         if any(terms.values()) or any(truncs.values()):
             self.agents = []

@@ -181,6 +181,12 @@ impl VecEnv {
         self.method.clone()
     }
 
+    /// The reward's terms, in the order `step` writes them (the `[reward]` keys of a configuration).
+    #[getter]
+    fn reward_term_names(&self) -> Vec<&'static str> {
+        agents::env::RewardTerms::NAMES.to_vec()
+    }
+
     /// Starts environment `i`'s next episode from `seed`; writes its robots' observations into
     /// `obs` (agents × obs_dim, float64).
     fn reset(&mut self, i: usize, seed: u64, mut obs: PyReadwriteArray2<f64>) -> PyResult<()> {
@@ -195,9 +201,11 @@ impl VecEnv {
     }
 
     /// One step of every environment (GIL released): `actions` (num_envs·agents × act_dim) in;
-    /// observations, rewards and the flags out, into the arrays given (every length checked before
-    /// anything steps).
+    /// observations, rewards and the flags out, into the arrays given, and what each reward term
+    /// added to each reward into `terms` (num_envs·agents × 13) if given (every length checked
+    /// before anything steps).
     #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (actions, obs, rewards, terminated, truncated, hit, success, terms=None))]
     fn step(
         &mut self,
         py: Python<'_>,
@@ -208,6 +216,7 @@ impl VecEnv {
         mut truncated: PyReadwriteArray1<bool>,
         mut hit: PyReadwriteArray1<bool>,
         mut success: PyReadwriteArray1<bool>,
+        mut terms: Option<PyReadwriteArray2<f64>>,
     ) -> PyResult<()> {
         let rows = self.results.len();
         let a = actions.as_slice().map_err(|e| bad("actions", e))?;
@@ -238,6 +247,18 @@ impl VecEnv {
                 return Err(bad(name, format!("{} entries, not {rows}", out.len())));
             }
         }
+        let width = agents::env::RewardTerms::NAMES.len();
+        let terms = match terms.as_mut() {
+            None => None,
+            Some(t) => {
+                let t = t.as_slice_mut().map_err(|e| bad("terms", e))?;
+                if t.len() != rows * width {
+                    let want = format!("{} entries, not {rows} x {width}", t.len());
+                    return Err(bad("terms", want));
+                }
+                Some(t)
+            }
+        };
         let (inner, results) = (&mut self.inner, &mut self.results);
         py.detach(|| inner.step(a, o, results))
             .map_err(|e| bad("actions", e))?;
@@ -247,6 +268,11 @@ impl VecEnv {
         let [(_, t), (_, u), (_, h), (_, s)] = flags;
         for (k, r) in self.results.iter().enumerate() {
             (t[k], u[k], h[k], s[k]) = (r.terminated, r.truncated, r.hit, r.success);
+        }
+        if let Some(out) = terms {
+            for (row, r) in out.chunks_mut(width).zip(&self.results) {
+                row.copy_from_slice(&r.terms);
+            }
         }
         Ok(())
     }
@@ -288,10 +314,80 @@ fn checkpoint_from_onnx(
     serde_json::to_string(&ck).map_err(|e| bad("checkpoint", e))
 }
 
+/// One traced control step: episode, step, time, observation, network output, controls.
+type Traced = (usize, usize, f64, Vec<f64>, Vec<f64>, Vec<f64>);
+
+/// `rally eval` (the same function): `agent` (a scripted variant, a built-in checkpoint's name or
+/// a checkpoint file) on `episodes` single serves of `serve` from `seed` on the robot `model`, all
+/// cores, the GIL released. The report's JSON text, and every control step when `trace` (at most
+/// 100 episodes).
+#[pyfunction]
+#[pyo3(signature = (agent, episodes=100, seed=0, serve="p2", model="default", mean_action=false, trace=false))]
+#[allow(clippy::too_many_arguments)]
+fn evaluate(
+    py: Python<'_>,
+    agent: &str,
+    episodes: usize,
+    seed: u64,
+    serve: &str,
+    model: &str,
+    mean_action: bool,
+    trace: bool,
+) -> PyResult<(String, Vec<Traced>)> {
+    if !(1..=100_000).contains(&episodes) {
+        return Err(bad("episodes", format!("{episodes}: 1 to 100000")));
+    }
+    if trace && episodes > 100 {
+        let why = "a trace holds every step's observation";
+        return Err(bad(
+            "trace",
+            format!("at most 100 episodes ({episodes} asked): {why}"),
+        ));
+    }
+    let kind = match serve {
+        "p1" | "p2" | "rally" | "stroke" => sim::serve::ServeKind::parse(serve).expect("a serve"),
+        other => return Err(bad("serve", format!("'{other}': p1, p2, rally or stroke"))),
+    };
+    let (body, arena) = robot(model)?;
+    let mut spec =
+        agents::factory::PlayerSpec::resolve(agent, &body, &|p| std::fs::read_to_string(p))
+            .map_err(|e| bad("agent", e))?;
+    if mean_action {
+        spec = spec.mean_action();
+    }
+    let e = agents::eval::Evaluation {
+        model: body,
+        config: arena,
+        preset: sim::arena::MYOCHALLENGE,
+        kind,
+        episodes,
+        seed,
+    };
+    let (report, steps) = py
+        .detach(|| agents::eval::evaluate_traced(&e, &spec, &|| {}, trace))
+        .map_err(|e| bad("agent", e))?;
+    let text = serde_json::to_string(&report).map_err(|e| bad("report", e))?;
+    let steps = steps
+        .into_iter()
+        .map(|s| {
+            (
+                s.episode,
+                s.step,
+                s.time,
+                s.observation,
+                s.action,
+                s.controls,
+            )
+        })
+        .collect();
+    Ok((text, steps))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;
     m.add_function(wrap_pyfunction!(checkpoint_from_onnx, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -65,10 +65,15 @@ def test_the_vector_env_steps_every_environment_as_a_single_one_would():
     for _ in range(60):
         a = rng.uniform(-1, 1, size=(4, 13))
         obs, r, term, trunc, infos = vec.step(a)
+        # Each reward term's share, named as the configuration names the weights; they sum to it.
+        parts = infos["reward_terms"]
+        assert list(parts) == vec.reward_term_names and "grasp" in parts
+        np.testing.assert_allclose(sum(parts.values()), r, rtol=1e-12, atol=1e-9)
         if episodes_ended == 0:
-            o1, r1, t1, u1, _ = single.step(a[2])
+            o1, r1, t1, u1, i1 = single.step(a[2])
             np.testing.assert_array_equal(obs[2] if not (t1 or u1) else infos["final_obs"][2], o1)
             assert r[2] == r1
+            assert i1["reward_terms"] == {n: parts[n][2] for n in parts}
         done = term | trunc
         if done.any():
             episodes_ended += int(done.sum())
@@ -111,6 +116,8 @@ def test_the_rally_passes_pettingzoos_parallel_api_test():
     while env.agents:
         obs, rewards, terms, truncs, infos = env.step({a: np.zeros(13) for a in env.agents})
         steps += 1
+        for a in ("a", "b"):
+            assert abs(sum(infos[a]["reward_terms"].values()) - rewards[a]) < 1e-9
     assert steps > 10 and (any(terms.values()) or any(truncs.values()))
     with pytest.raises(ValueError, match="actions"):
         env.reset(seed=3)
@@ -164,3 +171,36 @@ def test_an_onnx_network_from_numpy_weights_becomes_a_checkpoint():
                                 obs_std=[1.0])
     with pytest.raises(ValueError, match="onnx"):
         mr.checkpoint_from_onnx(b"not a network", method="kmac", name="x")
+
+
+def test_rally_eval_of_an_onnx_checkpoint_plays_the_numpy_forward_of_its_weights(tmp_path):
+    pytest.importorskip("onnx")
+    rng = np.random.default_rng(2)
+    w = [(rng.normal(0, 0.2, (24, 206)), rng.normal(0, 0.1, 24)),
+         (rng.normal(0, 0.3, (13, 24)), rng.normal(0, 0.1, 13))]
+    mean, std = rng.normal(0, 1, 206), rng.uniform(0.5, 2, 206)
+    path = tmp_path / "mine.json"
+    path.write_text(mr.checkpoint_from_onnx(mlp_onnx(w), method="kmac", name="mine",
+                                            obs_mean=list(mean), obs_std=list(std)))
+    report = mr.evaluate(path, episodes=3, seed=11, mean_action=True, trace=True)
+    assert report["episodes"] == 3 and report["seed"] == 11
+    t = report["trace"]
+    assert sorted(set(t["episode"].tolist())) == [0, 1, 2]
+    assert t["observation"].shape == (len(t["step"]), 206) and t["action"].shape[1] == 13
+    # The network's input is the normalised observation in float32, as an exported policy sees it.
+    x = ((t["observation"] - mean) / std).astype(np.float32)
+    h = np.tanh(x @ w[0][0].T.astype(np.float32) + w[0][1].astype(np.float32))
+    a = h @ w[1][0].T.astype(np.float32) + w[1][1].astype(np.float32)
+    np.testing.assert_allclose(t["action"], a, rtol=1e-5, atol=1e-5)
+    assert np.abs(a).max() > 0.1, "the test's weights move the robot"
+    # The same evaluation without the trace gives the same report; rally eval's bad arguments.
+    again = mr.evaluate(str(path), episodes=3, seed=11, mean_action=True)
+    assert again == {k: v for k, v in report.items() if k != "trace"}
+    with pytest.raises(ValueError, match="trace"):
+        mr.evaluate(path, episodes=101, trace=True)
+    with pytest.raises(ValueError, match="agent"):
+        mr.evaluate(tmp_path / "missing.json")
+    with pytest.raises(ValueError, match="serve"):
+        mr.evaluate("scripted", serve="lob")
+    with pytest.raises(ValueError, match="episodes"):
+        mr.evaluate("scripted", episodes=0)

@@ -1,7 +1,10 @@
 //! `rally eval`: hit rate, success rate, effort and mean activation of an agent on seeded
 //! single-serve episodes (paper §V-B), with 95% intervals, a progress bar and all cores.
 
-use agents::eval::{evaluate, EvalReport, Evaluation};
+use std::io::Write;
+use std::path::PathBuf;
+
+use agents::eval::{evaluate_traced, EvalReport, Evaluation};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sim::serve::ServeKind;
@@ -12,7 +15,7 @@ use super::{parse_preset, CliError};
 #[derive(Args, Debug)]
 #[command(
     after_help = "Agents: scripted, scripted-drive, scripted-soft, a built-in checkpoint by name (kmac, kmac-rally, muscle-ppo, muscle-pd, dynsyn:\nbuilt into the binary) or a checkpoint file (rally train writes OUT/checkpoint.json).\n\n\
-                  Examples:\n  rally eval scripted --episodes 200 --seed 1 --serve p2\n  rally eval scripted --model myochallenge --episodes 1000 --seed 2026"
+                  Examples:\n  rally eval scripted --episodes 200 --seed 1 --serve p2\n  rally eval scripted --model myochallenge --episodes 1000 --seed 2026\n                    rally eval mine.json --episodes 2 --mean-action --trace steps.jsonl"
 )]
 pub struct EvalArgs {
     /// The agent: a scripted variant's name or a checkpoint file.
@@ -38,6 +41,12 @@ pub struct EvalArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
+    /// Also write every control step to FILE, one JSON object a line: `episode`, `step`, `time`,
+    /// the `observation` the network was given (before the checkpoint's normalisation), its
+    /// `action` (the mean, before noise and controller) and the muscle `controls` written (about
+    /// 1.5 MB an episode on the built-in robot; at most 100 episodes).
+    #[arg(long, value_name = "FILE")]
+    trace: Option<PathBuf>,
     #[command(flatten)]
     model: super::ModelArg,
 }
@@ -81,19 +90,6 @@ fn print_table(r: &EvalReport, model: &str) {
     println!("  endings          {}", ends.join(", "));
 }
 
-/// The same player acting with its mean action (a checkpoint without its `policy_std`).
-pub fn mean_action(spec: agents::factory::PlayerSpec) -> agents::factory::PlayerSpec {
-    match spec {
-        agents::factory::PlayerSpec::Checkpoint(c) => {
-            let mut c = (*c).clone();
-            c.policy_std = None;
-            c.name = format!("{} (mean action)", c.name);
-            agents::factory::PlayerSpec::Checkpoint(std::sync::Arc::new(c))
-        }
-        other => other,
-    }
-}
-
 /// Runs `rally eval`.
 pub fn run(args: &EvalArgs) -> Result<(), CliError> {
     let super::Body {
@@ -101,9 +97,15 @@ pub fn run(args: &EvalArgs) -> Result<(), CliError> {
         config,
         name,
     } = args.model.load()?;
+    if args.trace.is_some() && args.episodes > 100 {
+        return Err(CliError::Usage(format!(
+            "--trace: at most 100 episodes ({} asked): a trace holds every step's observation",
+            args.episodes
+        )));
+    }
     let mut spec = super::player(&args.agent, &model, "AGENT")?;
     if args.mean_action {
-        spec = mean_action(spec);
+        spec = spec.mean_action();
     }
     let kind = ServeKind::parse(&args.serve).expect("clap checked the serve's name");
     let bar = ProgressBar::new(args.episodes);
@@ -120,9 +122,13 @@ pub fn run(args: &EvalArgs) -> Result<(), CliError> {
         episodes: args.episodes as usize,
         seed: args.seed,
     };
-    let report =
-        evaluate(&evaluation, &spec, &tick).map_err(|e| CliError::Failed(anyhow::anyhow!(e)))?;
+    let (report, trace) = evaluate_traced(&evaluation, &spec, &tick, args.trace.is_some())
+        .map_err(|e| CliError::Failed(anyhow::anyhow!(e)))?;
     bar.finish_and_clear();
+    if let Some(path) = &args.trace {
+        write_trace(path, &trace)
+            .map_err(|e| CliError::Failed(anyhow::anyhow!("--trace {}: {e}", path.display())))?;
+    }
     if args.json {
         let mut v = serde_json::to_value(&report).map_err(anyhow::Error::from)?;
         v["model"] = name.into();
@@ -130,5 +136,19 @@ pub fn run(args: &EvalArgs) -> Result<(), CliError> {
     } else {
         print_table(&report, &name);
     }
+    Ok(())
+}
+
+/// Writes `trace` to `path`, one JSON object a line (through a temporary file: a failed write
+/// leaves no half-written trace).
+fn write_trace(path: &std::path::Path, trace: &[agents::eval::TraceStep]) -> anyhow::Result<()> {
+    let tmp = path.with_extension("partial");
+    let mut out = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+    for step in trace {
+        serde_json::to_writer(&mut out, step)?;
+        out.write_all(b"\n")?;
+    }
+    out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+    std::fs::rename(&tmp, path)?;
     Ok(())
 }

@@ -18,6 +18,7 @@ pub struct CheckpointPlayer {
     observer: Observer,
     mapper: ActionMapper,
     obs: Vec<f64>,
+    raw: Vec<f64>,
     mean: Vec<f64>,
     seed: u64,
     noise: sim::rng::Rng,
@@ -44,6 +45,7 @@ impl CheckpointPlayer {
             mapper: ActionMapper::new(model, &checkpoint.controller),
             checkpoint,
             obs: Vec::new(),
+            raw: Vec::new(),
             mean: Vec::new(),
             seed,
             noise: noise_stream(seed),
@@ -83,6 +85,7 @@ impl Player for CheckpointPlayer {
     ) -> Result<(), InvalidAction> {
         self.observer.update_command(robot, ball, t);
         self.observer.observe(robot, ball, t, &mut self.obs);
+        self.raw.clone_from(&self.obs);
         let o = &self.checkpoint.observation;
         for (x, (m, s)) in self.obs.iter_mut().zip(o.mean.iter().zip(&o.std)) {
             *x = (*x - m) / s;
@@ -104,5 +107,9 @@ impl Player for CheckpointPlayer {
             .controls(&model, &robot.state, &action, sim::arena::CONTROL_DT, ctrl);
         crate::controller::apply_grip_floor(robot, self.checkpoint.grip_floor.unwrap_or(0.0), ctrl);
         Ok(())
+    }
+
+    fn last_decision(&self) -> Option<(&[f64], &[f64])> {
+        (!self.mean.is_empty()).then_some((&self.raw, &self.mean))
     }
 }

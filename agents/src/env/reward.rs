@@ -62,6 +62,45 @@ pub struct RewardTerms {
 }
 
 impl RewardTerms {
+    /// Every term's name, in [`RewardTerms::weighted`]'s order (the `[reward]` keys of a training
+    /// configuration).
+    pub const NAMES: [&'static str; 13] = [
+        "grasp",
+        "position",
+        "orientation",
+        "velocity",
+        "ball_out",
+        "hit",
+        "landing",
+        "centre",
+        "in_box",
+        "fault",
+        "ready",
+        "dual",
+        "effort",
+    ];
+
+    /// Each term times its weight, in [`RewardTerms::NAMES`]'s order: what each term added to the
+    /// step's reward ([`RewardTerms::total`] is their sum, added in this order).
+    pub fn weighted(&self, w: &RewardWeights) -> [f64; 13] {
+        let w = &w.0;
+        [
+            w.grasp * self.grasp,
+            w.position * self.position,
+            w.orientation * self.orientation,
+            w.velocity * self.velocity,
+            w.ball_out * self.ball_out,
+            w.hit * self.hit,
+            w.landing * self.landing,
+            w.centre * self.centre,
+            w.in_box * self.in_box,
+            w.fault * self.fault,
+            w.ready * self.ready,
+            w.dual * self.dual,
+            w.effort * self.effort,
+        ]
+    }
+
     /// `Σ wᵢ·termᵢ`.
     pub fn total(&self, w: &RewardWeights) -> f64 {
         let w = &w.0;
@@ -259,5 +298,41 @@ impl StrokeReward {
             task_terms(&local, bounce, &mut terms);
         }
         (terms, paid)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_weighted_terms_are_named_as_the_configuration_names_them_and_add_up_to_the_reward() {
+        let json = serde_json::to_value(RewardTerms::default()).unwrap();
+        let keys: Vec<&str> = json
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
+        let mut names = RewardTerms::NAMES.to_vec();
+        let mut sorted = keys.clone();
+        names.sort_unstable();
+        sorted.sort_unstable();
+        assert_eq!(names, sorted);
+        // Distinct values per term, so a term paired with another's weight would show.
+        let mut v = serde_json::Map::new();
+        for (k, name) in RewardTerms::NAMES.iter().enumerate() {
+            v.insert(name.to_string(), (0.1 + 0.07 * k as f64).into());
+        }
+        let terms: RewardTerms = serde_json::from_value(v.into()).unwrap();
+        let w = RewardWeights::default();
+        let parts = terms.weighted(&w);
+        let wj = serde_json::to_value(w).unwrap();
+        for (k, name) in RewardTerms::NAMES.iter().enumerate() {
+            let expected = wj[name].as_f64().unwrap() * (0.1 + 0.07 * k as f64);
+            assert_eq!(parts[k], expected, "{name}");
+        }
+        let sum = parts.iter().fold(0.0, |s, x| s + x);
+        assert_eq!(sum.to_bits(), terms.total(&w).to_bits());
     }
 }

@@ -241,7 +241,7 @@ fn entrants(args: &ReproduceArgs, model: &Arc<Model>) -> Result<Vec<Entrant>, Cl
                     agents.push(Entrant(
                         Some(m),
                         format!("{} (mean action)", m.paper_name()),
-                        Some(super::eval::mean_action(spec.clone())),
+                        Some(spec.clone().mean_action()),
                         Some(c.clone()),
                     ));
                 }

@@ -38,6 +38,8 @@ pub struct AgentStep {
     pub tracking: Option<f64>,
     /// ‖a‖₁/n_a after the step.
     pub activation: f64,
+    /// What each reward term added to `reward` ([`crate::env::RewardTerms::NAMES`]'s order).
+    pub terms: [f64; 13],
 }
 
 impl TrainingEnv {
@@ -83,6 +85,7 @@ impl TrainingEnv {
                     dual: 0.0,
                     tracking,
                     activation: tr.terms.effort,
+                    terms: tr.terms.weighted(&env.weights),
                 }]
             }
             TrainingEnv::Rally(env) => {
@@ -100,6 +103,7 @@ impl TrainingEnv {
                         dual: t.step.terms.dual,
                         tracking: t.tracking,
                         activation: t.step.terms.effort,
+                        terms: t.step.terms.weighted(&env.weights),
                     })
                     .collect()
             }
