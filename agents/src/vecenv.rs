@@ -205,6 +205,74 @@ impl VecEnv {
     }
 }
 
+impl VecEnv {
+    /// Steps every environment with the same `actions` (one robot's row, or `agents` rows) for
+    /// about `seconds`, starting each ended episode again from the next seed: the environments'
+    /// own speed, without a caller between the steps (the Python package's benchmark sets it beside
+    /// the same stepping from Python). Returns the robot-steps taken.
+    pub fn run_fixed(&mut self, actions: &[f64], seconds: f64) -> Result<u64, String> {
+        let rows = self.agents * self.act_dim;
+        if actions.len() != rows {
+            return Err(format!("actions: {} entries, not {rows}", actions.len()));
+        }
+        let n = self.envs.len();
+        let all: Vec<f64> = actions.iter().copied().cycle().take(n * rows).collect();
+        let mut obs = vec![0.0; n * self.agents * self.obs_dim];
+        let mut results = vec![StepResult::default(); n * self.agents];
+        let mut scratch = vec![0.0; self.agents * self.obs_dim];
+        let (start, mut steps, mut seed) = (std::time::Instant::now(), 0u64, n as u64);
+        while steps == 0 || start.elapsed().as_secs_f64() < seconds {
+            self.step(&all, &mut obs, &mut results)?;
+            steps += (n * self.agents) as u64;
+            for i in 0..n {
+                if self.over[i] {
+                    self.reset(i, seed, &mut scratch)?;
+                    seed += 1;
+                }
+            }
+        }
+        Ok(steps)
+    }
+}
+
+/// `rally bench train`'s ceiling: `envs` single-serve worlds of `model` (P2 serves, MyoChallenge
+/// contact laws) stepped for about `seconds` on every core with fixed controls (every muscle at 0.1),
+/// without controller, observation or reward. Physics steps per second.
+pub fn physics_alone(
+    model: &Arc<Model>,
+    arena: &ArenaConfig,
+    envs: usize,
+    seconds: f64,
+) -> Result<f64, String> {
+    use sim::episode::SingleServe;
+    use sim::rng::Rng;
+    use sim::serve::ServeKind;
+    let mut worlds: Vec<SingleServe> = (0..envs)
+        .map(|k| {
+            let mut w = SingleServe::new(model.clone(), arena, sim::arena::MYOCHALLENGE)?;
+            w.reset(ServeKind::P2, &mut Rng::seeded(k as u64), None);
+            Ok(w)
+        })
+        .collect::<Result<_, String>>()?;
+    let start = std::time::Instant::now();
+    let mut physics_steps = 0u64;
+    while physics_steps == 0 || start.elapsed().as_secs_f64() < seconds {
+        worlds.par_iter_mut().enumerate().for_each(|(k, w)| {
+            for _ in 0..10 {
+                if w.done {
+                    w.reset(ServeKind::P2, &mut Rng::seeded(k as u64), None);
+                }
+                for (i, _) in model.muscles() {
+                    w.robot.state.ctrl[i] = 0.1;
+                }
+                w.step();
+            }
+        });
+        physics_steps += 10 * envs as u64;
+    }
+    Ok(physics_steps as f64 / start.elapsed().as_secs_f64())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -285,5 +353,10 @@ mod tests {
         v.reset(0, 0, &mut obs[..od]).unwrap();
         v.step(&vec![0.0; 2 * ad], &mut obs, &mut results).unwrap();
         assert!(!results[0].terminated, "reset: it plays again");
+        // Stepping without a caller: episodes start again as they end; one row of actions.
+        assert!(v.run_fixed(&[0.0; 3], 0.0).is_err());
+        let steps = v.run_fixed(&vec![0.0; ad], 0.3).unwrap();
+        assert!(steps >= 2 && steps.is_multiple_of(2), "{steps}");
+        assert!(steps > 400, "{steps} steps: episodes were started again");
     }
 }

@@ -187,6 +187,21 @@ impl VecEnv {
         agents::env::RewardTerms::NAMES.to_vec()
     }
 
+    /// Steps every environment with the same `actions` (one robot's row) for about `seconds` in
+    /// Rust alone, GIL released, each ended episode started again: the benchmark's reference.
+    /// Robot-steps taken.
+    fn run_fixed(
+        &mut self,
+        py: Python<'_>,
+        actions: numpy::PyReadonlyArray1<f64>,
+        seconds: f64,
+    ) -> PyResult<u64> {
+        let a = actions.as_slice().map_err(|e| bad("actions", e))?.to_vec();
+        let inner = &mut self.inner;
+        py.detach(|| inner.run_fixed(&a, seconds))
+            .map_err(|e| bad("actions", e))
+    }
+
     /// Starts environment `i`'s next episode from `seed`; writes its robots' observations into
     /// `obs` (agents × obs_dim, float64).
     fn reset(&mut self, i: usize, seed: u64, mut obs: PyReadwriteArray2<f64>) -> PyResult<()> {
@@ -314,6 +329,20 @@ fn checkpoint_from_onnx(
     serde_json::to_string(&ck).map_err(|e| bad("checkpoint", e))
 }
 
+/// `rally bench train`'s ceiling for the robot `model`: `num_envs` worlds stepped for about
+/// `seconds` on every core with every muscle at 0.1 (no controller, observation or reward), GIL
+/// released. Physics steps per second.
+#[pyfunction]
+#[pyo3(signature = (model="default", num_envs=64, seconds=3.0))]
+fn physics_alone(py: Python<'_>, model: &str, num_envs: usize, seconds: f64) -> PyResult<f64> {
+    if num_envs == 0 {
+        return Err(bad("num_envs", "at least 1"));
+    }
+    let (body, arena) = robot(model)?;
+    py.detach(|| agents::vecenv::physics_alone(&body, &arena, num_envs, seconds))
+        .map_err(|e| bad("model", e))
+}
+
 /// One traced control step: episode, step, time, observation, network output, controls.
 type Traced = (usize, usize, f64, Vec<f64>, Vec<f64>, Vec<f64>);
 
@@ -388,6 +417,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;
     m.add_function(wrap_pyfunction!(checkpoint_from_onnx, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(physics_alone, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -204,3 +204,36 @@ def test_rally_eval_of_an_onnx_checkpoint_plays_the_numpy_forward_of_its_weights
         mr.evaluate("scripted", serve="lob")
     with pytest.raises(ValueError, match="episodes"):
         mr.evaluate("scripted", episodes=0)
+
+
+def myochallenge_or_skip():
+    """MyoSuite's robot once ``rally model import myosuite`` has run (CI imports it and sets
+    RALLY_REQUIRE_MYOCHALLENGE, so there the test cannot skip)."""
+    import os
+
+    try:
+        return mr.make("SingleServe-v0", method="kmac", model="myochallenge")
+    except ValueError as e:
+        if "rally model import" in str(e) and not os.environ.get("RALLY_REQUIRE_MYOCHALLENGE"):
+            pytest.skip("MyoSuite's robot not imported (rally model import myosuite)")
+        raise
+
+
+def test_myosuites_robot_in_every_face():
+    env = myochallenge_or_skip()
+    assert env.model == "myochallenge"
+    assert env.observation_space.shape == (640,) and env.action_space.shape == (32,)
+    check_env(env, skip_render_check=True)
+    muscle = mr.make("SingleServe-v0", method="muscle", model="myochallenge")
+    assert muscle.action_space.shape == (275,)
+    assert [n for n in env.action_names if "pelvis" in n] == ["target.pelvis_x", "target.pelvis_y"]
+    vec = mr.make_vec("SingleServe-v0", num_envs=2, method="kmac", model="myochallenge")
+    obs, _ = vec.reset(seed=4)
+    one, _ = env.reset(seed=5)
+    np.testing.assert_array_equal(obs[1], one)
+    for _ in range(20):
+        obs, r, term, trunc, infos = vec.step(np.zeros((2, 32)))
+        np.testing.assert_allclose(sum(infos["reward_terms"].values()), r, atol=1e-9)
+    report = mr.evaluate("kmac", model="myochallenge", episodes=4, seed=3)
+    # The built-in "kmac" of this robot (the default robot's would not fit its 640 observations).
+    assert report["episodes"] == 4 and report["agent"] == "kmac"

@@ -218,7 +218,6 @@ pub fn train_rates(
 ) -> anyhow::Result<serde_json::Value> {
     use agents::ppo::trainer::Trainer;
     use agents::ppo::{Method, TrainConfig};
-    use rayon::prelude::*;
     agents::ppo::fix_matmul_threads();
     let config = TrainConfig::default();
     let envs = config.ppo.envs;
@@ -243,31 +242,8 @@ pub fn train_rates(
     let wall = start.elapsed().as_secs_f64();
     let tm = t.timing;
     // The physics alone: the same environments, fixed controls (every muscle at 0.1), all cores.
-    let mut worlds: Vec<sim::episode::SingleServe> = (0..envs)
-        .map(|k| {
-            let mut w = sim::episode::SingleServe::new(model.clone(), &arena, MYOCHALLENGE)
-                .map_err(anyhow::Error::msg)?;
-            w.reset(ServeKind::P2, &mut Rng::seeded(k as u64), None);
-            Ok(w)
-        })
-        .collect::<anyhow::Result<_>>()?;
-    let start = Instant::now();
-    let mut physics_steps = 0u64;
-    while start.elapsed().as_secs_f64() < seconds.max(0.5) {
-        worlds.par_iter_mut().enumerate().for_each(|(k, w)| {
-            for _ in 0..10 {
-                if w.done {
-                    w.reset(ServeKind::P2, &mut Rng::seeded(k as u64), None);
-                }
-                for (i, _) in model.muscles() {
-                    w.robot.state.ctrl[i] = 0.1;
-                }
-                w.step();
-            }
-        });
-        physics_steps += 10 * envs as u64;
-    }
-    let physics = physics_steps as f64 / start.elapsed().as_secs_f64();
+    let physics = agents::vecenv::physics_alone(&model, &arena, envs, seconds.max(0.5))
+        .map_err(anyhow::Error::msg)?;
     let training = tm.env_steps as f64 / wall;
     let rollout = tm.env_steps as f64 / (tm.simulation + tm.policy);
     let total = (tm.simulation + tm.policy + tm.update).max(1e-9);
