@@ -76,7 +76,7 @@ fn the_rally_finetune_configuration_is_the_rally_one_but_for_the_ball_out_term()
 }
 
 #[test]
-fn the_myochallenge_configuration_is_the_default_but_for_the_official_kmac_noise_and_schedule() {
+fn the_myochallenge_configuration_is_the_default_but_for_kmac_noise_schedule_and_entropy() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../config/train-myochallenge.toml"
@@ -94,6 +94,8 @@ fn the_myochallenge_configuration_is_the_default_but_for_the_official_kmac_noise
     c.controller.activation_noise = 0.0;
     assert_eq!(c.ppo.schedule, agents::ppo::Schedule::LinearDecay);
     c.ppo.schedule = agents::ppo::Schedule::Adaptive;
+    assert_eq!(c.ppo.entropy_coef, 0.0);
+    c.ppo.entropy_coef = TrainConfig::default().ppo.entropy_coef;
     assert_eq!(c, TrainConfig::default());
 }
 
