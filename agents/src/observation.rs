@@ -35,6 +35,9 @@ pub enum ObsBlock {
     /// The planner's command: strike position (3), racket velocity (3), racket orientation (4),
     /// time to the strike (1); zeros while no ball is coming.
     Command,
+    /// The planner's strike position alone (3; zeros while no ball is coming): the paper's
+    /// Position-only ablation.
+    CommandPosition,
 }
 
 impl ObsBlock {
@@ -58,6 +61,7 @@ impl ObsBlock {
             ObsBlock::BallPos | ObsBlock::BallVel => 3,
             ObsBlock::Paddle => 13,
             ObsBlock::Command => 11,
+            ObsBlock::CommandPosition => 3,
         }
     }
 
@@ -112,6 +116,52 @@ impl ObsBlock {
                     "t_strike",
                 ],
             ),
+            ObsBlock::CommandPosition => tag("command", &["strike_x", "strike_y", "strike_z"]),
+        }
+    }
+}
+
+/// What of the planner's command a policy sees and is rewarded for tracking (the paper's §V-C
+/// ablations): all of it (Diff-Muscle), the strike position alone (Position-only), or nothing
+/// (Without-Planner).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CommandVariant {
+    /// The whole command: position, velocity, orientation and time to the strike.
+    #[default]
+    Full,
+    /// The strike position alone.
+    Position,
+    /// No command.
+    None,
+}
+
+impl CommandVariant {
+    /// The observation's blocks: every block, with the command as the variant has it.
+    pub fn blocks(self) -> Vec<ObsBlock> {
+        let command = match self {
+            CommandVariant::Full => Some(ObsBlock::Command),
+            CommandVariant::Position => Some(ObsBlock::CommandPosition),
+            CommandVariant::None => None,
+        };
+        ObsBlock::ALL
+            .iter()
+            .filter_map(|&b| {
+                if b == ObsBlock::Command {
+                    command
+                } else {
+                    Some(b)
+                }
+            })
+            .collect()
+    }
+
+    /// The variant's name in a configuration (`full`, `position`, `none`).
+    pub fn name(self) -> &'static str {
+        match self {
+            CommandVariant::Full => "full",
+            CommandVariant::Position => "position",
+            CommandVariant::None => "none",
         }
     }
 }
@@ -230,6 +280,10 @@ impl Observer {
                         out.push((t_hit - t).max(0.0));
                     }
                     None => out.extend([0.0; 11]),
+                },
+                ObsBlock::CommandPosition => match &self.plan {
+                    Some((p, _)) => out.extend(p.strike_pos.iter()),
+                    None => out.extend([0.0; 3]),
                 },
             }
         }

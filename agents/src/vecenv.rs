@@ -15,7 +15,7 @@ use sim::config::ArenaConfig;
 use sim::model::Model;
 
 use crate::controller::ActionMapper;
-use crate::observation::{observation_names, ObsBlock};
+use crate::observation::observation_names;
 use crate::ppo::trainer::envs::{make_env, read_bank, TrainingEnv};
 use crate::ppo::{Method, TrainConfig};
 
@@ -80,7 +80,7 @@ impl VecEnv {
             obs_dim: dims.0,
             act_dim: dims.1,
             agents: config.env.agents(),
-            observation_names: observation_names(&model, &ObsBlock::ALL),
+            observation_names: observation_names(&model, &config.obs_blocks()),
             action_names: ActionMapper::new(&model, &controller).action_names(&model),
         };
         let mut scratch = vec![0.0; v.agents * v.obs_dim];

@@ -233,6 +233,101 @@ fn the_linear_decay_schedule_falls_to_zero_at_the_step_target() {
 }
 
 #[test]
+fn each_ablation_is_observed_rewarded_and_recorded_as_configured() {
+    use agents::env::Ablation;
+    use agents::observation::CommandVariant;
+    let m = model();
+    for (command, width) in [
+        (CommandVariant::Full, 206),
+        (CommandVariant::Position, 198),
+        (CommandVariant::None, 195),
+    ] {
+        for task_reward in [true, false] {
+            let mut c = small(2, 4, 10);
+            c.ablation = Ablation {
+                command,
+                task_reward,
+            };
+            // The environment's own observation, and its reward without the removed terms.
+            let mut v = agents::vecenv::VecEnv::new(
+                m.clone(),
+                &sim::config::ArenaConfig::default(),
+                Method::Kmac,
+                &c,
+                1,
+            )
+            .unwrap();
+            assert_eq!(v.obs_dim(), width, "{command:?}");
+            let names = v.observation_names().join(" ");
+            assert_eq!(
+                names.contains("command.racket_vx"),
+                command == CommandVariant::Full
+            );
+            assert_eq!(
+                names.contains("command.strike_x"),
+                command != CommandVariant::None
+            );
+            let mut obs = vec![0.0; width];
+            let mut r = vec![agents::vecenv::StepResult::default()];
+            let removed = |name: &str| {
+                agents::env::RewardTerms::NAMES
+                    .iter()
+                    .position(|n| *n == name)
+                    .unwrap()
+            };
+            let mut paid = [false; 13];
+            for _ in 0..120 {
+                v.step(&[0.0; 13], &mut obs, &mut r).unwrap();
+                for (p, x) in paid.iter_mut().zip(r[0].terms) {
+                    *p |= x != 0.0;
+                }
+                if command != CommandVariant::Full {
+                    assert_eq!(r[0].terms[removed("orientation")], 0.0);
+                }
+                if command == CommandVariant::None {
+                    assert_eq!(r[0].terms[removed("position")], 0.0);
+                }
+                if !task_reward {
+                    assert_eq!(r[0].terms[removed("fault")], 0.0);
+                    assert_eq!(r[0].terms[removed("hit")], 0.0);
+                }
+                if r[0].terminated || r[0].truncated {
+                    break;
+                }
+            }
+            // What is not removed is paid (so the checks above could fail).
+            assert!(paid[removed("grasp")]);
+            assert_eq!(paid[removed("position")], command != CommandVariant::None);
+            assert_eq!(
+                paid[removed("orientation")],
+                command == CommandVariant::Full
+            );
+            // Trained under it: the checkpoint observes as it trained and says how.
+            let ablation = c.ablation;
+            let mut t = Trainer::new(m.clone(), Method::Kmac, c, 5).unwrap();
+            t.iterate().unwrap();
+            let ck = t.checkpoint("probe", "test", "none").unwrap();
+            assert_eq!(ck.observation.mean.len(), width);
+            let recorded = ck.training.as_ref().unwrap().ablation;
+            let full = command == CommandVariant::Full && task_reward;
+            assert_eq!(recorded, (!full).then_some(ablation));
+            let text = serde_json::to_string(&ck).unwrap();
+            let back = agents::checkpoint::Checkpoint::from_json(&text, &m).unwrap();
+            let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(back));
+            let e = agents::eval::Evaluation {
+                model: m.clone(),
+                config: sim::config::ArenaConfig::default(),
+                preset: sim::arena::MYOCHALLENGE,
+                kind: sim::serve::ServeKind::P2,
+                episodes: 2,
+                seed: 1,
+            };
+            agents::eval::evaluate(&e, &spec, &|| {}).unwrap();
+        }
+    }
+}
+
+#[test]
 fn every_method_trains_and_exports_a_checkpoint_that_plays() {
     let m = model();
     for method in Method::ALL {

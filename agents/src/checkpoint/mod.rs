@@ -132,6 +132,9 @@ pub struct Training {
     /// checkpoint plays with the noise it was trained with.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_scale: Option<f64>,
+    /// The ablation it was trained under (the paper's §V-C); absent: none, Diff-Muscle itself.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ablation: Option<crate::env::Ablation>,
 }
 
 fn default_robot() -> String {

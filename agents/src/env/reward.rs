@@ -153,6 +153,61 @@ impl Default for RewardWeights {
     }
 }
 
+/// The paper's ablations of Diff-Muscle (§V-C), as settings of a run (`[ablation]` of a training
+/// configuration; recorded in its checkpoints): what of the planner's command the policy observes
+/// and is rewarded for tracking, and whether the sparse task reward is paid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Ablation {
+    /// `full` (Diff-Muscle), `position` (Position-only: the strike position observed, only the
+    /// position term of the command reward paid) or `none` (Without-Planner: no command observed,
+    /// no command reward).
+    pub command: crate::observation::CommandVariant,
+    /// Pay the task terms (hit, landing, centre, in_box, fault; in a rally dual); false:
+    /// Without-Task.
+    pub task_reward: bool,
+}
+
+impl Default for Ablation {
+    fn default() -> Self {
+        Ablation {
+            command: crate::observation::CommandVariant::Full,
+            task_reward: true,
+        }
+    }
+}
+
+impl Ablation {
+    /// Diff-Muscle itself: nothing removed.
+    pub fn is_none(&self) -> bool {
+        *self == Ablation::default()
+    }
+
+    /// `weights` with the removed terms at zero.
+    pub fn weights(&self, weights: RewardWeights) -> RewardWeights {
+        use crate::observation::CommandVariant;
+        let mut w = weights;
+        if self.command != CommandVariant::Full {
+            (w.0.orientation, w.0.velocity, w.0.ball_out) = (0.0, 0.0, 0.0);
+        }
+        if self.command == CommandVariant::None {
+            w.0.position = 0.0;
+        }
+        if !self.task_reward {
+            let t = &mut w.0;
+            (t.hit, t.landing, t.centre, t.in_box, t.fault, t.dual) =
+                (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        }
+        w
+    }
+
+    /// A short name: `full`, `position`, `none`, with `-notask` without the task reward.
+    pub fn name(&self) -> String {
+        let task = if self.task_reward { "" } else { "-notask" };
+        format!("{}{task}", self.command.name())
+    }
+}
+
 /// The serve box's centre height, m (official code: the `(0, 1.225)` the `centre` term aims at).
 pub const SERVE_BOX_CENTRE_Z: f64 = 0.5 * (arena::SERVE_BOX_Z.0 + arena::SERVE_BOX_Z.1);
 /// Control steps after the ball leaves the paddle at which the task terms are judged and a training
@@ -334,5 +389,47 @@ mod tests {
         }
         let sum = parts.iter().fold(0.0, |s, x| s + x);
         assert_eq!(sum.to_bits(), terms.total(&w).to_bits());
+    }
+
+    #[test]
+    fn each_ablation_removes_its_terms_and_only_those() {
+        use crate::observation::CommandVariant;
+        let w = RewardWeights::default();
+        // The terms whose weight the ablation changed (each to zero).
+        let zeroed = |a: Ablation| -> Vec<&str> {
+            let b = serde_json::to_value(a.weights(w)).unwrap();
+            let f = serde_json::to_value(w).unwrap();
+            RewardTerms::NAMES
+                .iter()
+                .copied()
+                .filter(|n| b[n] != f[n])
+                .inspect(|n| assert_eq!(b[n], 0.0, "{n}"))
+                .collect()
+        };
+        assert!(zeroed(Ablation::default()).is_empty());
+        assert!(Ablation::default().is_none());
+        let position = Ablation {
+            command: CommandVariant::Position,
+            task_reward: true,
+        };
+        assert_eq!(zeroed(position), ["orientation", "velocity"]);
+        let none = Ablation {
+            command: CommandVariant::None,
+            task_reward: true,
+        };
+        assert_eq!(zeroed(none), ["position", "orientation", "velocity"]);
+        let notask = Ablation {
+            command: CommandVariant::Full,
+            task_reward: false,
+        };
+        assert_eq!(
+            zeroed(notask),
+            ["hit", "landing", "centre", "in_box", "fault", "dual"]
+        );
+        assert_eq!(notask.name(), "full-notask");
+        // ball_out is 0 by default; a configuration that pays it loses it without the full command.
+        let mut paid = w;
+        paid.0.ball_out = 5.0;
+        assert_eq!(position.weights(paid).ball_out, 0.0);
     }
 }

@@ -380,6 +380,9 @@ pub struct TrainConfig {
     pub validation: ValidationConfig,
     /// Balls recorded from rallies, served in a share of the single-serve environment's episodes.
     pub bank: BankConfig,
+    /// The paper's ablations (what of the command is observed and rewarded, the task reward);
+    /// the default removes nothing.
+    pub ablation: crate::env::Ablation,
 }
 
 /// A ball bank for the single-serve environment (ours; see [`crate::env::BallBank`]): the file
@@ -414,6 +417,16 @@ impl TrainConfig {
     /// What validation plays: `[validation] env`, else the training environment.
     pub fn validation_env(&self) -> TrainEnv {
         self.validation.env.unwrap_or(self.env)
+    }
+
+    /// The observation's blocks (every block; the command as `[ablation] command` has it).
+    pub fn obs_blocks(&self) -> Vec<crate::observation::ObsBlock> {
+        self.ablation.command.blocks()
+    }
+
+    /// The reward's weights, less the terms the ablation removes.
+    pub fn reward_weights(&self) -> crate::env::RewardWeights {
+        self.ablation.weights(self.reward)
     }
 
     /// The controller a method's checkpoints carry.

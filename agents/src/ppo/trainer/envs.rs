@@ -7,7 +7,6 @@ use sim::model::Model;
 
 use crate::controller::ControllerSpec;
 use crate::env::{Env, EpisodeEnd, RallyEnv};
-use crate::observation::ObsBlock;
 use crate::ppo::{TrainConfig, TrainEnv};
 
 /// A training environment: a single serve (one robot) or a self-play rally (two).
@@ -132,8 +131,9 @@ pub fn make_env(
     config: &TrainConfig,
     bank: Option<&crate::env::BallBank>,
 ) -> Result<(TrainingEnv, usize, usize), String> {
-    // Both environments: MyoChallenge contact laws, every observation block.
-    let (preset, blocks) = (sim::arena::MYOCHALLENGE, ObsBlock::ALL.to_vec());
+    // Both environments: MyoChallenge contact laws; every observation block but what the
+    // ablation removes of the command.
+    let (preset, blocks) = (sim::arena::MYOCHALLENGE, config.obs_blocks());
     let grip_floor = config.controller.grip_floor;
     Ok(match config.env {
         TrainEnv::Single => {
@@ -144,7 +144,7 @@ pub fn make_env(
                 preset,
                 controller,
                 blocks,
-                config.reward,
+                config.reward_weights(),
                 kind,
             )?;
             env.end = EpisodeEnd::Training;
@@ -164,7 +164,7 @@ pub fn make_env(
                 preset,
                 controller,
                 blocks,
-                config.reward,
+                config.reward_weights(),
             )?;
             env.grip_floor = grip_floor;
             let (o, a) = (env.obs_dim(), env.action_dim());

@@ -3,7 +3,6 @@
 use std::sync::Arc;
 
 use crate::checkpoint::{Checkpoint, ObservationSpec, Training, TrainingPoint, FORMAT, VERSION};
-use crate::observation::ObsBlock;
 use crate::ppo::{stream_seed, TrainEnv};
 
 use super::*;
@@ -148,7 +147,7 @@ impl Trainer {
             model: sim::config::robot_name(&self.model).into(),
             controller: self.controller.clone(),
             observation: ObservationSpec {
-                blocks: ObsBlock::ALL.to_vec(),
+                blocks: self.config.obs_blocks(),
                 mean: self.normalizer.mean.clone(),
                 std: self.normalizer.scale(),
             },
@@ -181,6 +180,7 @@ impl Trainer {
                 rally_length: (self.config.env == TrainEnv::Rally).then_some(last.rally_length),
                 note: None,
                 noise_scale: None,
+                ablation: (!self.config.ablation.is_none()).then_some(self.config.ablation),
             }),
         })
     }
