@@ -120,3 +120,97 @@ fn reproduce_on_myosuites_robot_reads_its_checkpoints_and_names_its_report_after
     assert_eq!(&png[1..4], b"PNG");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn reproduce_ablations_groups_the_checkpoints_by_variant_over_their_seeds() {
+    let dir = std::env::temp_dir().join(format!("rally-cli-ablations-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let ck = dir.join("checkpoints");
+    std::fs::create_dir_all(ck.join("ablations")).unwrap();
+    let rally = || Command::new(env!("CARGO_BIN_EXE_rally"));
+    let reproduce = |out: &str| {
+        let o = rally()
+            .args([
+                "reproduce",
+                "--ablations",
+                "--episodes",
+                "2",
+                "--rallies",
+                "0",
+            ])
+            .arg("--checkpoints")
+            .arg(&ck)
+            .arg("--out")
+            .arg(dir.join(out))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read_to_string(dir.join(out)).unwrap()
+    };
+    let empty = reproduce("empty.md");
+    assert!(empty.contains("No ablation runs yet"), "{empty}");
+    // Tiny runs: two seeds of Diff-Muscle, one of Without-Planner, one of Without-Task.
+    let runs = [
+        ("full", true, 1),
+        ("full", true, 2),
+        ("none", true, 1),
+        ("full", false, 3),
+    ];
+    for (k, (command, task, seed)) in runs.iter().enumerate() {
+        let config = dir.join(format!("train{k}.toml"));
+        std::fs::write(
+            &config,
+            format!(
+                "[ppo]\nenvs = 2\nsteps_per_env = 64\nhidden = [8, 8]\ncheckpoint_every = 1\n\
+                 [ablation]\ncommand = \"{command}\"\ntask_reward = {task}\n"
+            ),
+        )
+        .unwrap();
+        let out = dir.join(format!("run{k}"));
+        let o = rally()
+            .args(["train", "--method", "kmac", "--steps", "256", "--quiet"])
+            .arg("--seed")
+            .arg(seed.to_string())
+            .arg("--config")
+            .arg(&config)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::copy(
+            out.join("checkpoint.json"),
+            ck.join("ablations").join(format!("{k}.json")),
+        )
+        .unwrap();
+    }
+    let md = reproduce("a/reproduce.md");
+    assert!(
+        md.contains("`rally reproduce --ablations --episodes 2"),
+        "{md}"
+    );
+    assert!(md.contains("## Ablations (paper §V-C)"), "{md}");
+    for row in [
+        "| Diff-Muscle | 2 |",
+        "| Without-Planner | 1 |",
+        "| Without-Task | 1 |",
+    ] {
+        assert!(md.contains(row), "{row}: {md}");
+    }
+    assert!(
+        md.contains("**Position-only** (paper:") && md.contains("not run"),
+        "{md}"
+    );
+    // Untrained policies hit nothing: Without-Planner's "fails" holds, Without-Task's finding not.
+    assert!(md.contains("**reproduces** (rule: hit below 10%"), "{md}");
+    assert!(
+        md.contains("**does not reproduce** (rule: hit at least 50%"),
+        "{md}"
+    );
+    let png = std::fs::read(dir.join("a/reproduce_ablations.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    assert_eq!(reproduce("b/reproduce.md"), md);
+    if std::env::var_os("RALLY_KEEP").is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -140,6 +140,121 @@ pub fn learning_curves(series: &[Series], out: &Path) -> Result<(), String> {
     root.present().map_err(|e| e.to_string())
 }
 
+/// One variant's learning curves, one per seed: (env steps, hit rate, success rate) points.
+pub struct SeedCurves {
+    /// Legend label.
+    pub label: String,
+    /// Each seed's curve.
+    pub seeds: Vec<Vec<(f64, f64, f64)>>,
+}
+
+/// Bins each seed's curve on a common grid of `bins` intervals up to `max_steps` and returns, for
+/// every bin that every seed has a point in, (the bin's centre, mean, std over seeds) of `pick`.
+fn seed_band(
+    seeds: &[Vec<(f64, f64, f64)>],
+    max_steps: f64,
+    bins: usize,
+    pick: fn(&(f64, f64, f64)) -> f64,
+) -> Vec<(f64, f64, f64)> {
+    let width = max_steps / bins as f64;
+    (0..bins)
+        .filter_map(|b| {
+            let (lo, hi) = (b as f64 * width, (b + 1) as f64 * width);
+            let per_seed: Option<Vec<f64>> = seeds
+                .iter()
+                .map(|c| {
+                    let inside: Vec<f64> = c
+                        .iter()
+                        .filter(|p| p.0 > lo && p.0 <= hi)
+                        .map(pick)
+                        .collect();
+                    (!inside.is_empty()).then(|| inside.iter().sum::<f64>() / inside.len() as f64)
+                })
+                .collect();
+            let v = per_seed?;
+            let n = v.len() as f64;
+            let mean = v.iter().sum::<f64>() / n;
+            let var = if v.len() > 1 {
+                v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0)
+            } else {
+                0.0
+            };
+            Some((0.5 * (lo + hi), mean, var.sqrt()))
+        })
+        .collect()
+}
+
+/// Draws hit and success rate against control steps for every variant into `out`: the mean over
+/// its seeds as a line, ± one standard deviation as a band.
+pub fn ablation_curves(variants: &[SeedCurves], out: &Path) -> Result<(), String> {
+    font()?;
+    let root = BitMapBackend::new(out, (1200, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let panels = root.split_evenly((1, 2));
+    let max_steps = variants
+        .iter()
+        .flat_map(|v| v.seeds.iter().flatten().map(|p| p.0))
+        .fold(1.0, f64::max);
+    type Pick = fn(&(f64, f64, f64)) -> f64;
+    let metrics: [(&str, Pick); 2] = [
+        ("hit rate (training), mean ± std over seeds", |p| p.1),
+        ("success rate (training), mean ± std over seeds", |p| p.2),
+    ];
+    for (panel, (title, pick)) in panels.iter().zip(metrics) {
+        let mut chart = ChartBuilder::on(panel)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(52)
+            .build_cartesian_2d(0.0..max_steps / 1e6, 0.0..1.0)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("control steps (millions)")
+            .label_style(("sans-serif", 13))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (k, v) in variants.iter().enumerate() {
+            let colour = COLOURS[k % COLOURS.len()];
+            let band = seed_band(&v.seeds, max_steps, 60, pick);
+            if band.is_empty() {
+                continue;
+            }
+            let mut outline: Vec<(f64, f64)> = band
+                .iter()
+                .map(|&(x, m, sd)| (x / 1e6, (m + sd).min(1.0)))
+                .collect();
+            outline.extend(
+                band.iter()
+                    .rev()
+                    .map(|&(x, m, sd)| (x / 1e6, (m - sd).max(0.0))),
+            );
+            chart
+                .draw_series(std::iter::once(Polygon::new(outline, colour.mix(0.2))))
+                .map_err(|e| e.to_string())?;
+            chart
+                .draw_series(LineSeries::new(
+                    band.iter().map(|&(x, m, _)| (x / 1e6, m)),
+                    colour.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?
+                .label(v.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
 /// Draws the distribution of rally lengths of each series (fraction of rallies with each number of
 /// returns, lengths above `max_len` in the last bin) into `out`.
 pub fn rally_histogram(

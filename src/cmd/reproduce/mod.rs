@@ -22,6 +22,7 @@ use sim::serve::ServeKind;
 use super::plot::{learning_curves, Series};
 use super::CliError;
 
+mod ablations;
 mod report;
 use report::{rally_section, report};
 
@@ -41,7 +42,9 @@ pub fn paper_row(m: Method) -> (f64, f64, f64) {
     after_help = "Examples:\n  rally reproduce --episodes 1000 --seed 2026 --rallies 200\n  \
                   (writes docs/reproduce.md, docs/reproduce_curves.png, docs/reproduce_rallies.png, docs/reproduce_returns.png)\n  \
                   rally reproduce --model myochallenge --seed 2027\n  \
-                  (MyoSuite's robot: config/checkpoints/myochallenge/ to docs/reproduce-myochallenge.md and its PNGs)"
+                  (MyoSuite's robot: config/checkpoints/myochallenge/ to docs/reproduce-myochallenge.md and its PNGs)\n  \
+                  rally reproduce --ablations --rallies 0\n  \
+                  (also the ablations of config/checkpoints/ablations/: docs/reproduce_ablations.png)"
 )]
 pub struct ReproduceArgs {
     /// Episodes per agent.
@@ -61,6 +64,11 @@ pub struct ReproduceArgs {
     /// Rallies per pairing in the dual-rally section (match seed: --seed); 0 skips the section.
     #[arg(long, default_value = "200")]
     rallies: u32,
+    /// Add the ablations section (paper §V-C): every checkpoint of CHECKPOINTS/ablations/ (each
+    /// names its ablation and seed), evaluated on the same serves, grouped by variant: curves with
+    /// their spread over seeds, a table, and whether the paper's three findings reproduce.
+    #[arg(long)]
+    ablations: bool,
     #[command(flatten)]
     model: super::ModelArg,
 }
@@ -217,6 +225,15 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
     let mut md = report(args, &model, &rows, plotted.then_some(&curves_png));
     if args.rallies > 0 {
         md.push_str(&rallies(args, &body)?);
+    }
+    if args.ablations {
+        let dir = args.checkpoints().join("ablations");
+        md.push_str(&ablations::section(
+            &dir,
+            &model,
+            &evaluation,
+            &args.figure("ablations"),
+        )?);
     }
     std::fs::write(&out, &md)?;
     print!("{md}");

@@ -146,11 +146,14 @@ fn intro(s: &mut String, args: &ReproduceArgs, model: &sim::model::Model) {
             "# Reproducing the paper's Table I on the {robot} robot ({muscles} muscles)\n"
         );
     }
-    let flag = if default {
+    let mut flag = if default {
         String::new()
     } else {
         format!(" --model {}", args.model.name)
     };
+    if args.ablations {
+        flag.push_str(" --ablations");
+    }
     let _ = writeln!(
         s,
         "Written by `rally reproduce{flag} --episodes {} --seed {} --rallies {}` (simulator {}). Every agent plays the same {} \
