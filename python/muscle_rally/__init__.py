@@ -47,7 +47,7 @@ def _lookup(env_id: str):
 
 
 def make(env_id: str = "SingleServe-v0", **kwargs) -> gym.Env:
-    """One environment: ``method`` (kmac, muscle, muscle-pd, dynsyn), ``serve`` (p2, rally, stroke),
+    """One environment: ``method`` (kmac, muscle, muscle-pd, dynsyn), ``serve`` (p2, p1, rally, stroke),
     ``model`` (default, myochallenge after ``rally model import myosuite``, or an MJCF file),
     ``config`` (a ``rally train`` configuration file)."""
     return _lookup(env_id)[0](**kwargs)

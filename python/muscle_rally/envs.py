@@ -18,7 +18,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from ._core import VecEnv as _Core
 
 METHODS = ("kmac", "muscle", "muscle-pd", "dynsyn")
-SERVES = ("p2", "rally", "stroke")
+SERVES = ("p2", "p1", "rally", "stroke")
 _SEED_SPAN = 2**63
 
 

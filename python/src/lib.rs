@@ -83,9 +83,10 @@ fn configuration(
     if let Some(s) = serve {
         c.serve = match s {
             "p2" => TrainServe::P2,
+            "p1" => TrainServe::P1,
             "rally" => TrainServe::Rally,
             "stroke" => TrainServe::Stroke,
-            other => return Err(bad("serve", format!("'{other}': p2, rally or stroke"))),
+            other => return Err(bad("serve", format!("'{other}': p2, p1, rally or stroke"))),
         };
     }
     if let Some(e) = env {

@@ -27,6 +27,17 @@ def test_gymnasiums_checker_passes_for_every_method():
         assert len(env.action_names) == env.action_space.shape[0]
 
 
+def test_every_serve_distribution_plays():
+    first = {}
+    for serve in mr.SERVES:
+        env = mr.make("SingleServe-v0", method="kmac", serve=serve)
+        obs, _ = env.reset(seed=9)
+        first[serve] = obs[env.observation_names.index("ball_vel.x")]
+        env.step(np.zeros(13))
+    # Four distributions, four different first balls from the same seed.
+    assert len(set(first.values())) == len(mr.SERVES), first
+
+
 def test_registered_with_gymnasium():
     env = gym.make("muscle_rally/SingleServe-v0", method="muscle-pd")
     obs, _ = env.reset(seed=1)

@@ -33,7 +33,8 @@ pub struct TrainArgs {
     /// default: the configuration's `env` (config/train.toml: single).
     #[arg(long, value_parser = parse_env)]
     env: Option<TrainEnv>,
-    /// Training serves of the single-serve environment: p2 (MyoChallenge P2), rally (the paper's
+    /// Training serves of the single-serve environment: p2 (MyoChallenge P2), p1 (MyoChallenge P1:
+    /// a jittered position, a fixed velocity), rally (the paper's
     /// heuristic rally serve, the official code's training serve) or stroke (a robot's return: the
     /// rally serve with a stroke's error, half of them outside the serve box; ours); default: the
     /// configuration's.
@@ -81,10 +82,11 @@ fn parse_method(s: &str) -> Result<Method, String> {
 fn parse_serve(s: &str) -> Result<TrainServe, String> {
     match s {
         "p2" => Ok(TrainServe::P2),
+        "p1" => Ok(TrainServe::P1),
         "rally" => Ok(TrainServe::Rally),
         "stroke" => Ok(TrainServe::Stroke),
         _ => Err(format!(
-            "'{s}': the training serves are p2, rally and stroke"
+            "'{s}': the training serves are p2, p1, rally and stroke"
         )),
     }
 }

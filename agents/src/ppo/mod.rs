@@ -230,6 +230,8 @@ pub enum TrainServe {
     /// MyoChallenge P2 serves (the evaluation's distribution; the seeds differ).
     #[default]
     P2,
+    /// MyoChallenge P1 serves (the easier phase: a narrower launch distribution).
+    P1,
     /// The paper's rally serve from B's hitting plane (the official code's training serve).
     Rally,
     /// A robot's return from B's hitting plane: the rally serve with a stroke's error, about half
@@ -242,6 +244,7 @@ impl TrainServe {
     pub fn kind(self) -> sim::serve::ServeKind {
         match self {
             TrainServe::P2 => sim::serve::ServeKind::P2,
+            TrainServe::P1 => sim::serve::ServeKind::P1,
             TrainServe::Rally => sim::serve::ServeKind::Rally {
                 server: sim::arena::Side::B,
             },
