@@ -64,8 +64,8 @@ def python_rate(model: str, method: str, n: int, seconds: float) -> float:
 
 
 def bare_rate(model: str, method: str, n: int, seconds: float) -> float:
-    """Env steps/s of ``_core.VecEnv.step`` called from Python (no gymnasium wrapper, no
-    autoreset: episodes that end stay over, which makes their steps cheap — a ceiling)."""
+    """Env steps/s of ``_core.VecEnv.step`` called from Python without the gymnasium wrapper (no
+    infos, no copies; ended episodes started again as the wrapper does)."""
     core = _core.VecEnv(method, n, model)
     rows = core.num_envs
     obs = np.zeros((rows, core.obs_dim))

@@ -5,7 +5,7 @@ tournament server and play a match against a built-in agent.
     pip install ./python torch onnx
     python python/examples/train_ppo.py --method kmac --steps 2e6 --out runs/py-kmac
     python python/examples/train_ppo.py --out runs/py-kmac --resume --steps 4e6   # continue
-    python python/examples/train_ppo.py --out runs/py-kmac --steps 0 \\
+    python python/examples/train_ppo.py --out runs/py-kmac --resume --steps 0 \\
         --server http://127.0.0.1:8080 --token "$T" --name py-kmac --opponent scripted
 
 A single-file PPO in the style of CleanRL's (clipped surrogate, GAE, a state-independent Gaussian,
@@ -57,7 +57,9 @@ def parse_args() -> argparse.Namespace:
 
 
 class RunningStats:
-    """Running mean and variance of the observations (Chan et al.'s parallel update)."""
+    """Running mean and variance of the observations (Chan et al.'s parallel update). The policy
+    sees ``(x - mean) / std`` with ``std = sqrt(var) + 0.01`` and no clip: exactly what the
+    checkpoint's normalisation does in evaluation and on the server."""
 
     def __init__(self, width: int):
         self.mean, self.var, self.count = np.zeros(width), np.ones(width), 1e-4
@@ -71,10 +73,10 @@ class RunningStats:
         self.count = total
 
     def std(self) -> np.ndarray:
-        return np.sqrt(self.var + 1e-8)
+        return np.sqrt(self.var) + 0.01
 
     def normalise(self, x: np.ndarray) -> np.ndarray:
-        return np.clip((x - self.mean) / self.std(), -10, 10)
+        return (x - self.mean) / self.std()
 
 
 def mlp(n_in: int, n_out: int, out_gain: float) -> nn.Sequential:
@@ -126,9 +128,10 @@ def train(args, envs, agent, stats, opt, state) -> None:
                 with torch.no_grad():
                     r = r + gamma * trunc * agent.critic(last).squeeze(-1).numpy()
             buf_rew[t], buf_done[t] = torch.as_tensor(r), torch.as_tensor(done, dtype=torch.float32)
-            hits += int(info["hit"][done].sum())
-            wins += int(info["success"][done].sum())
-            episodes += int(done.sum())
+            if done.any():  # the ended episodes' last flags (the rows have started again)
+                hits += int(info["final_info"]["hit"].sum())
+                wins += int(info["final_info"]["success"].sum())
+                episodes += int(done.sum())
         with torch.no_grad():
             x = torch.as_tensor(stats.normalise(obs), dtype=torch.float32)
             next_val = agent.critic(x).squeeze(-1)
@@ -211,7 +214,13 @@ def main() -> int:
     agent, stats = Agent(obs_dim, act_dim), RunningStats(obs_dim)
     opt = torch.optim.Adam(agent.parameters(), lr=args.lr, eps=1e-5)
     state = {"steps": 0, "iteration": 0, "curve": []}
+    if not args.resume and (out / "state.pt").exists():
+        print(f"{out} holds a run: --resume to continue it (or another --out)", file=sys.stderr)
+        return 2
     if args.resume:
+        if not (out / "state.pt").exists():
+            print(f"--resume: no run in {out} (no state.pt)", file=sys.stderr)
+            return 2
         saved = torch.load(out / "state.pt", weights_only=False)
         agent.load_state_dict(saved["agent"])
         opt.load_state_dict(saved["opt"])

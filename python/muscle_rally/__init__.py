@@ -22,7 +22,7 @@ import numpy as np
 
 from . import _core
 from ._core import __version__, checkpoint_from_onnx
-from .envs import METHODS, SERVES, SingleServeEnv, SingleServeVectorEnv
+from .envs import METHODS, SERVES, SingleServeEnv, SingleServeVectorEnv, _integer
 
 def __getattr__(name):
     # The rally needs PettingZoo (pip install muscle-rally[pettingzoo]); imported when asked for.
@@ -59,7 +59,8 @@ def make_vec(env_id: str = "SingleServe-v0", num_envs: int = 16, **kwargs):
 
 
 if "muscle_rally/SingleServe-v0" not in gym.registry:
-    gym.register(id="muscle_rally/SingleServe-v0", entry_point="muscle_rally.envs:SingleServeEnv")
+    gym.register(id="muscle_rally/SingleServe-v0", entry_point="muscle_rally.envs:SingleServeEnv",
+                 vector_entry_point="muscle_rally.envs:SingleServeVectorEnv")
 
 
 def evaluate(agent: str | os.PathLike, episodes: int = 100, seed: int = 0, serve: str = "p2",
@@ -72,10 +73,8 @@ def evaluate(agent: str | os.PathLike, episodes: int = 100, seed: int = 0, serve
     ``report["trace"]`` holds every control step as arrays: ``episode``, ``step``, ``time``, the
     ``observation`` the network was given (before the checkpoint's normalisation), its ``action``
     (the mean, before noise and the controller) and the muscle ``controls``."""
-    if not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes: {episodes!r}: a positive integer")
-    if not isinstance(seed, int) or not 0 <= seed < 2**64:
-        raise ValueError(f"seed: {seed!r}: 0 <= seed < 2**64")
+    episodes = _integer("episodes", episodes, 1, 100_001)
+    seed = _integer("seed", seed, 0, 2**64)
     text, steps = _core.evaluate(os.fspath(agent), episodes, seed, serve, model, bool(mean_action),
                                  bool(trace))
     report = json.loads(text)

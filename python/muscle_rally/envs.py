@@ -8,11 +8,13 @@ episode seeded ``s`` here is the episode ``rally train`` plays from seed ``s``.
 
 from __future__ import annotations
 
+import operator
 from typing import Any, Optional
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from ._core import VecEnv as _Core
@@ -22,13 +24,23 @@ SERVES = ("p2", "p1", "rally", "stroke")
 _SEED_SPAN = 2**63
 
 
+def _integer(name: str, x: Any, lo: int, hi: int) -> int:
+    """``x`` as an int in [lo, hi) (numpy integers too), else a ValueError naming ``name``."""
+    try:
+        v = operator.index(x)
+    except TypeError:
+        raise ValueError(f"{name}: {x!r}: an integer") from None
+    if not lo <= v < hi:
+        raise ValueError(f"{name}: {x!r}: {lo} <= {name} < {hi}")
+    return v
+
+
 def _core(method: str, num_envs: int, model: str, config, serve: str, env: str) -> _Core:
     if method not in METHODS:
         raise ValueError(f"method: '{method}': one of {', '.join(METHODS)}")
     if serve not in SERVES:
         raise ValueError(f"serve: '{serve}': one of {', '.join(SERVES)}")
-    if not isinstance(num_envs, int) or num_envs < 1:
-        raise ValueError(f"num_envs: {num_envs!r}: a positive integer")
+    num_envs = _integer("num_envs", num_envs, 1, 2**20)
     return _Core(method, num_envs, model, None if config is None else str(config), serve, env)
 
 
@@ -69,7 +81,8 @@ class SingleServeEnv(gym.Env):
     velocities, activations, muscle lengths, ball, paddle, the planner's command); not normalised.
     Action: ``act_dim`` entries in [-1, 1] named by ``action_names``, turned into muscle controls by
     the method's controller (K-MAC: joint targets; Muscle-PPO: every muscle's control; Muscle-PD:
-    muscle-length targets; DynSyn: synergy weights). ``info``: ``hit`` and ``success`` (so far) and
+    muscle-length targets; DynSyn: synergy weights; Muscle-PPO and Muscle-PD also drive the two
+    pelvis servos). ``info``: ``hit`` and ``success`` (so far in the episode) and
     ``reward_terms``, what each of the reward's terms (``reward_term_names``, the ``[reward]`` keys
     of a ``rally train`` configuration) added to the step's reward, weighted: they sum to it.
     """
@@ -86,16 +99,20 @@ class SingleServeEnv(gym.Env):
         self.action_names = list(self._core.action_names)
         self.reward_term_names = list(self._core.reward_term_names)
         self.method, self.model = self._core.method, self._core.model
+        self._started = False
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        if seed is not None:
+            seed = _integer("seed", seed, 0, 2**64)
         super().reset(seed=seed)
         episode = seed if seed is not None else int(self.np_random.integers(_SEED_SPAN))
-        if not 0 <= episode < 2**64:
-            raise ValueError(f"seed: {seed}: 0 <= seed < 2**64")
         self._core.reset(0, episode, self._buf.obs)
+        self._started = True
         return self._buf.obs[0].copy(), {"seed": episode}
 
     def step(self, action):
+        if not self._started:
+            raise ResetNeeded("step: call reset() first")
         self._buf.step(self._core, _actions(action, 1, self._core.act_dim))
         b = self._buf
         info = {"hit": bool(b.hit[0]), "success": bool(b.success[0]),
@@ -110,8 +127,10 @@ class SingleServeVectorEnv(VectorEnv):
     ends is followed at once by the next, whose first observation is returned; the last one is in
     ``infos["final_obs"]`` (rows where ``infos["_final_obs"]`` is true). Episode seeds: ``seed + i``
     for environment ``i`` at ``reset(seed=...)``, then drawn from the vector's own generator.
-    ``infos``: ``hit`` and ``success`` (arrays), ``reward_terms`` (an array per term name: what it
-    added to each environment's reward).
+    ``infos``: ``hit`` and ``success`` (arrays; for an environment that just started again, its new
+    episode's), ``reward_terms`` (an array per term name: what it added to each environment's
+    returned reward); for the episodes that ended, ``final_obs`` and ``final_info`` (their last
+    ``hit`` and ``success``), gymnasium's ``_``-prefixed masks saying which rows hold them.
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.SAME_STEP}
@@ -120,40 +139,51 @@ class SingleServeVectorEnv(VectorEnv):
                  model: str = "default", config: Optional[str] = None):
         self._core = _core(method, num_envs, model, config, serve, "single")
         self._buf = _Buffers(self._core)
-        self.num_envs = num_envs
+        self.num_envs = self._core.num_envs
         self.single_observation_space = spaces.Box(-np.inf, np.inf, (self._core.obs_dim,),
                                                    np.float64)
         self.single_action_space = spaces.Box(-1.0, 1.0, (self._core.act_dim,), np.float64)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space,
-                                                              num_envs)
-        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+                                                              self.num_envs)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
         self.observation_names = list(self._core.observation_names)
         self.action_names = list(self._core.action_names)
         self.reward_term_names = list(self._core.reward_term_names)
         self._rng = np.random.default_rng()
+        self._started = False
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         if seed is not None:
+            seed = _integer("seed", seed, 0, 2**64 - self.num_envs + 1)
             self._rng = np.random.default_rng(seed)
             seeds = [seed + i for i in range(self.num_envs)]
         else:
             seeds = [int(s) for s in self._rng.integers(_SEED_SPAN, size=self.num_envs)]
         for i, s in enumerate(seeds):
             self._core.reset(i, s, self._buf.obs[i:i + 1])
+        self._started = True
         return self._buf.obs.copy(), {"seed": np.array(seeds, dtype=np.uint64)}
 
     def step(self, actions):
+        if not self._started:
+            raise ResetNeeded("step: call reset() first")
         b = self._buf
         b.step(self._core, _actions(actions, self.num_envs, self._core.act_dim))
-        obs = b.obs.copy()
+        obs, hit, success = b.obs.copy(), b.hit.copy(), b.success.copy()
+        every = np.ones(self.num_envs, dtype=np.bool_)
         infos: dict[str, Any] = {
-            "hit": b.hit.copy(), "success": b.success.copy(),
+            "hit": hit, "_hit": every, "success": success, "_success": every,
             "reward_terms": {n: b.terms[:, k].copy() for k, n in enumerate(b.term_names)},
+            "_reward_terms": every,
         }
         done = b.terminated | b.truncated
         if done.any():
             infos["final_obs"] = np.where(done[:, None], obs, 0.0)
             infos["_final_obs"] = done.copy()
+            infos["final_info"] = {"hit": hit & done, "_hit": done.copy(),
+                                   "success": success & done, "_success": done.copy()}
+            infos["_final_info"] = done.copy()
+            infos["hit"], infos["success"] = hit & ~done, success & ~done
             for i in np.flatnonzero(done):
                 self._core.reset(int(i), int(self._rng.integers(_SEED_SPAN)),
                                  b.obs[i:i + 1])

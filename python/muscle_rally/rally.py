@@ -12,9 +12,10 @@ from typing import Optional
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 from pettingzoo import ParallelEnv
 
-from .envs import _actions, _Buffers, _core, _SEED_SPAN
+from .envs import _actions, _Buffers, _core, _integer, _SEED_SPAN
 
 
 class RallyParallelEnv(ParallelEnv):
@@ -42,8 +43,8 @@ class RallyParallelEnv(ParallelEnv):
 
     def reset(self, seed: Optional[int] = None, options: Optional[dict] = None):
         if seed is not None:
-            self._rng = np.random.default_rng(seed)
-            episode = seed
+            episode = _integer("seed", seed, 0, 2**64)
+            self._rng = np.random.default_rng(episode)
         else:
             episode = int(self._rng.integers(_SEED_SPAN))
         self._core.reset(0, episode, self._buf.obs)
@@ -52,6 +53,8 @@ class RallyParallelEnv(ParallelEnv):
         return obs, {a: {"seed": episode} for a in self.possible_agents}
 
     def step(self, actions):
+        if not self.agents:
+            raise ResetNeeded("step: the rally is over (or not started); call reset()")
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"actions: no action for {', '.join(missing)}")

@@ -42,6 +42,12 @@ def test_registered_with_gymnasium():
     env = gym.make("muscle_rally/SingleServe-v0", method="muscle-pd")
     obs, _ = env.reset(seed=1)
     assert obs.shape == env.observation_space.shape
+    # gymnasium.make_vec builds the Rust vector env, not a Python loop over single ones.
+    vec = gym.make_vec("muscle_rally/SingleServe-v0", num_envs=3, method="kmac",
+                       vectorization_mode="vector_entry_point")
+    assert isinstance(vec.unwrapped, mr.SingleServeVectorEnv) and vec.num_envs == 3
+    obs, _ = vec.reset(seed=np.int64(4))
+    assert obs.shape == (3, 206)
 
 
 def test_the_same_seed_is_the_rust_sides_trajectory_bit_for_bit():
@@ -89,6 +95,10 @@ def test_the_vector_env_steps_every_environment_as_a_single_one_would():
         if done.any():
             episodes_ended += int(done.sum())
             assert infos["_final_obs"].tolist() == done.tolist()
+            # The ended episodes' last flags in final_info; the rows restarted begin afresh.
+            assert infos["_final_info"].tolist() == done.tolist()
+            assert not (infos["hit"][done].any() or infos["success"][done].any())
+            assert not (infos["final_info"]["hit"] & ~done).any()
     assert obs.shape == (4, 206) and np.isfinite(obs).all()
 
 
@@ -106,6 +116,15 @@ def test_bad_arguments_raise_with_the_argument_named():
     with pytest.raises(ValueError, match="config"):
         mr.make("SingleServe-v0", config="/nonexistent/train.toml")
     env = mr.make("SingleServe-v0")
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros(13))
+    with pytest.raises(ValueError, match="seed"):
+        env.reset(seed=-1)
+    vec = mr.make_vec("SingleServe-v0", num_envs=np.int64(2))
+    with pytest.raises(gym.error.ResetNeeded):
+        vec.step(np.zeros((2, 13)))
+    with pytest.raises(ValueError, match="seed"):
+        vec.reset(seed=2**64 - 1)
     env.reset(seed=0)
     with pytest.raises(ValueError, match="action"):
         env.step(np.zeros(3))
@@ -130,6 +149,8 @@ def test_the_rally_passes_pettingzoos_parallel_api_test():
         for a in ("a", "b"):
             assert abs(sum(infos[a]["reward_terms"].values()) - rewards[a]) < 1e-9
     assert steps > 10 and (any(terms.values()) or any(truncs.values()))
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step({a: np.zeros(13) for a in ("a", "b")})
     with pytest.raises(ValueError, match="actions"):
         env.reset(seed=3)
         env.step({"a": np.zeros(13)})
