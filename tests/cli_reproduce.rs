@@ -190,6 +190,11 @@ fn reproduce_ablations_groups_the_checkpoints_by_variant_over_their_seeds() {
         "{md}"
     );
     assert!(md.contains("## Ablations (paper §V-C)"), "{md}");
+    // Table I gains Diff-Muscle's spread over its two seeds.
+    assert!(
+        md.contains("Diff-Muscle over its 2 training seeds of the ablation runs (seeds 1, 2;"),
+        "{md}"
+    );
     for row in [
         "| Diff-Muscle | 2 |",
         "| Without-Planner | 1 |",

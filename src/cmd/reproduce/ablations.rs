@@ -100,13 +100,14 @@ fn mean_sd(x: &[f64]) -> (f64, f64) {
 }
 
 /// Reads and evaluates the ablation checkpoints; the report's section and its figure (written to
-/// `figure`). No directory or no checkpoint: a section that says so.
+/// `figure`), and, when Diff-Muscle has two seeds or more there, a line for Table I with its spread
+/// over them. No directory or no checkpoint: a section that says so.
 pub(super) fn section(
     dir: &Path,
     model: &Arc<Model>,
     evaluation: &Evaluation,
     figure: &Path,
-) -> Result<String, CliError> {
+) -> Result<(String, Option<String>), CliError> {
     let mut s = String::from("\n## Ablations (paper §V-C)\n\n");
     let mut files: Vec<_> = match std::fs::read_dir(dir) {
         Ok(entries) => entries
@@ -123,7 +124,7 @@ pub(super) fn section(
              a `rally train --config` file (docs/training.md) and copy their checkpoints there.",
             dir.display()
         );
-        return Ok(s);
+        return Ok((s, None));
     }
     let bar = ProgressBar::new(files.len() as u64 * evaluation.episodes as u64);
     bar.set_style(
@@ -345,5 +346,24 @@ pub(super) fn section(
             );
         }
     }
-    Ok(s)
+    let spread = groups
+        .iter()
+        .find(|g| g.ablation == VARIANTS[0].0 && g.members.len() >= 2)
+        .map(|g| {
+            let (hit, ok) = g.rates();
+            let ((hm, hs), (sm, ss)) = (mean_sd(&hit), mean_sd(&ok));
+            let seeds: Vec<String> = g.members.iter().map(|m| m.seed.to_string()).collect();
+            format!(
+                "Diff-Muscle over its {} training seeds of the ablation runs (seeds {}; the same \
+                 serves): hit {:.1} ± {:.1}%, success {:.1} ± {:.1}% (mean ± standard deviation \
+                 over seeds; the ablations section below).",
+                g.members.len(),
+                seeds.join(", "),
+                100.0 * hm,
+                100.0 * hs,
+                100.0 * sm,
+                100.0 * ss
+            )
+        });
+    Ok((s, spread))
 }

@@ -222,19 +222,23 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
     if plotted {
         learning_curves(&series, &curves_png).map_err(|e| CliError::Failed(anyhow!(e)))?;
     }
-    let mut md = report(args, &model, &rows, plotted.then_some(&curves_png));
+    let (ablation_md, spread) = if args.ablations {
+        let dir = args.checkpoints().join("ablations");
+        ablations::section(&dir, &model, &evaluation, &args.figure("ablations"))?
+    } else {
+        (String::new(), None)
+    };
+    let mut md = report(
+        args,
+        &model,
+        &rows,
+        plotted.then_some(&curves_png),
+        spread.as_deref(),
+    );
     if args.rallies > 0 {
         md.push_str(&rallies(args, &body)?);
     }
-    if args.ablations {
-        let dir = args.checkpoints().join("ablations");
-        md.push_str(&ablations::section(
-            &dir,
-            &model,
-            &evaluation,
-            &args.figure("ablations"),
-        )?);
-    }
+    md.push_str(&ablation_md);
     std::fs::write(&out, &md)?;
     print!("{md}");
     eprintln!("wrote {}", out.display());

@@ -116,10 +116,14 @@ pub(super) fn report(
     model: &sim::model::Model,
     rows: &[Row],
     curves: Option<&PathBuf>,
+    spread: Option<&str>,
 ) -> String {
     let mut s = String::new();
     intro(&mut s, args, model);
     results_table(&mut s, rows);
+    if let Some(line) = spread {
+        let _ = writeln!(s, "\n{line}");
+    }
     activation_table(&mut s, rows);
     episode_ends(&mut s, rows);
     provenance(&mut s, rows);
