@@ -22,6 +22,7 @@ fn kmac() -> ControllerSpec {
     ControllerSpec::Kmac {
         gains: PdGains { kp: 40.0, kd: 3.0 },
         activation_clamp: None,
+        activation_noise: None,
     }
 }
 
@@ -119,8 +120,18 @@ fn bad_checkpoints_are_refused_naming_the_field() {
     c.controller = ControllerSpec::Kmac {
         gains: PdGains { kp: -1.0, kd: 0.0 },
         activation_clamp: None,
+        activation_noise: None,
     };
     refused(&m, &c, "controller.gains");
+    for sigma in [-0.1, 1.5, 1e300] {
+        let mut c = good.clone();
+        c.controller = ControllerSpec::Kmac {
+            gains: PdGains { kp: 10.0, kd: 1.0 },
+            activation_clamp: None,
+            activation_noise: Some(sigma),
+        };
+        refused(&m, &c, "controller.activation_noise");
+    }
     // NaN cannot be written in JSON; a checkpoint built in memory is validated all the same.
     let mut c = good.clone();
     c.policy.as_mut().unwrap().layers[0].weights[1][5] = f64::NAN;

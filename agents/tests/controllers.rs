@@ -302,3 +302,101 @@ fn kmac_in_the_official_form_sends_its_activation_targets_clamped_and_noise_is_s
         .iter()
         .all(|&i| (clamp[0]..=clamp[1]).contains(&a[i])));
 }
+
+#[test]
+fn the_clamped_normal_mean_matches_its_closed_form_and_sampling() {
+    use agents::controller::clamped_normal_mean;
+    let [lo, hi] = agents::controller::official_activation_clamp();
+    // At the lower bound, far from the upper: half the noise is rectified, lo + σ/√(2π).
+    let at_lo = clamped_normal_mean(lo, 0.1, lo, hi);
+    assert!((at_lo - (lo + 0.1 / (2.0 * std::f64::consts::PI).sqrt())).abs() < 1e-12);
+    // No noise: the clamp.
+    assert_eq!(clamped_normal_mean(-0.3, 0.0, lo, hi), lo);
+    assert_eq!(clamped_normal_mean(0.5, 0.0, lo, hi), 0.5);
+    // Against 200 000 samples of the clamp of noisy controls, below, at, inside and near the top.
+    let mut rng = Rng::seeded(5);
+    for &(mu, sigma) in &[
+        (-0.2, 0.1),
+        (lo, 0.1),
+        (0.05, 0.1),
+        (0.5, 0.2),
+        (0.9, 0.1),
+        (1.2, 0.3),
+    ] {
+        let n = 200_000;
+        let sampled = (0..n)
+            .map(|_| (mu + sigma * rng.normal()).clamp(lo, hi))
+            .sum::<f64>()
+            / n as f64;
+        let exact = clamped_normal_mean(mu, sigma, lo, hi);
+        assert!(
+            (sampled - exact).abs() < 5.0 * sigma / (n as f64).sqrt(),
+            "mu {mu}, sigma {sigma}: sampled {sampled}, closed form {exact}"
+        );
+        assert!((lo..=hi).contains(&exact));
+    }
+}
+
+#[test]
+fn kmac_plays_the_mean_of_the_activation_noise_it_was_trained_with() {
+    let m = model();
+    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
+    robot.reset(Some(&ready(&m)));
+    let clamp = agents::controller::official_activation_clamp();
+    let gains = PdGains { kp: 10.0, kd: 1.0 };
+    let space = ActionSpace::new(&m);
+    let mut rng = Rng::seeded(11);
+    let targets: Vec<f64> = space
+        .joints
+        .iter()
+        .map(|&j| {
+            let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
+            rng.uniform(r[0], r[1])
+        })
+        .collect();
+    let controls = |kmac: &mut Kmac| {
+        let mut ctrl = vec![0.0; m.actuators.len()];
+        kmac.controls(&m, &robot.state, &targets, 0.01, &mut ctrl);
+        ctrl
+    };
+    let official = || Kmac::new(&m, gains).with_activation_clamp(Some(clamp));
+    let plain = controls(&mut official());
+    let expected = controls(&mut official().with_expected_activation_noise(Some(0.1)));
+    // Relaxed muscles are raised by the rectified noise; none is lowered below its plain control
+    // by more than the clamp's top allows.
+    let relaxed: Vec<usize> = space
+        .muscles
+        .iter()
+        .copied()
+        .filter(|&a| plain[a] <= clamp[0])
+        .collect();
+    assert!(!relaxed.is_empty());
+    for &a in &relaxed {
+        assert!((expected[a] - plain[a] - 0.1 / (2.0 * std::f64::consts::PI).sqrt()).abs() < 1e-3);
+    }
+    // The expectation is what the noisy controls average to: 4 000 draws, each muscle within
+    // 5 standard errors.
+    let draws = 4_000;
+    let mut mean = vec![0.0; m.actuators.len()];
+    for seed in 0..draws {
+        let mut k = official();
+        k.set_activation_noise(0.1, seed);
+        for (s, c) in mean.iter_mut().zip(controls(&mut k)) {
+            *s += c / draws as f64;
+        }
+    }
+    for &a in &space.muscles {
+        assert!(
+            (mean[a] - expected[a]).abs() < 5.0 * 0.1 / (draws as f64).sqrt(),
+            "muscle {a}: noisy mean {}, expectation {}",
+            mean[a],
+            expected[a]
+        );
+    }
+    // While training noise is drawn, it is the noise that plays, not the expectation.
+    let mut trained = official().with_expected_activation_noise(Some(0.1));
+    trained.set_activation_noise(0.1, 7);
+    let mut noisy = official();
+    noisy.set_activation_noise(0.1, 7);
+    assert_eq!(controls(&mut trained), controls(&mut noisy));
+}

@@ -90,6 +90,26 @@ fn the_myochallenge_configuration_is_the_default_but_for_kmac_noise_schedule_and
         (c.controller.action_noise, c.controller.activation_noise),
         (0.05, 0.1)
     );
+    // Its K-MAC checkpoints record the activation noise (they play its expectation); the other
+    // methods have no activation of their own and record none.
+    let m = model();
+    let spec = |c: &TrainConfig, method| c.controller(method, &m);
+    match (
+        spec(&c, Method::Kmac),
+        spec(&TrainConfig::default(), Method::Kmac),
+    ) {
+        (
+            agents::controller::ControllerSpec::Kmac {
+                activation_noise: Some(sigma),
+                ..
+            },
+            agents::controller::ControllerSpec::Kmac {
+                activation_noise: None,
+                ..
+            },
+        ) => assert_eq!(sigma, 0.1),
+        other => panic!("{other:?}"),
+    }
     c.controller.action_noise = 0.0;
     c.controller.activation_noise = 0.0;
     assert_eq!(c.ppo.schedule, agents::ppo::Schedule::LinearDecay);

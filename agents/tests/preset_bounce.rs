@@ -23,6 +23,7 @@ fn players_plan_with_the_bounce_of_the_arena_preset() {
         ControllerSpec::Kmac {
             gains: PdGains { kp: 10.0, kd: 1.0 },
             activation_clamp: None,
+            activation_noise: None,
         },
         &[],
         Activation::Linear,

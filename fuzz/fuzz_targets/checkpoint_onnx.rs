@@ -26,6 +26,7 @@ fuzz_target!(|data: &[u8]| {
         controller: ControllerSpec::Kmac {
             gains: PdGains { kp: 10.0, kd: 1.0 },
             activation_clamp: None,
+            activation_noise: None,
         },
         observation: ObservationSpec {
             blocks: ObsBlock::ALL.to_vec(),

@@ -286,6 +286,18 @@ impl Checkpoint {
                 ));
             }
         }
+        if let ControllerSpec::Kmac {
+            activation_noise: Some(sigma),
+            ..
+        } = self.controller
+        {
+            if !(0.0..=1.0).contains(&sigma) {
+                return Err(bad(
+                    "controller.activation_noise",
+                    format!("{sigma}: must be a σ in [0, 1]"),
+                ));
+            }
+        }
         if let ControllerSpec::Kmac { gains, .. } | ControllerSpec::MusclePd { gains } =
             &self.controller
         {

@@ -59,6 +59,23 @@ pub fn official_activation_clamp() -> [f64; 2] {
     [sigmoid(-7.5), sigmoid(2.5)]
 }
 
+/// `E[clamp(mu + sigma·Z, lo, hi)]` for a standard normal `Z`: the mean control that Gaussian noise
+/// of `sigma` on `mu` gives once clamped (the noise is rectified at the bounds, so the mean moves
+/// towards the interval's inside: `mu = lo` becomes about `lo + sigma/√(2π)`). `sigma = 0`: the
+/// clamp itself.
+pub fn clamped_normal_mean(mu: f64, sigma: f64, lo: f64, hi: f64) -> f64 {
+    if sigma <= 0.0 {
+        return mu.clamp(lo, hi);
+    }
+    let cdf = |x: f64| 0.5 * libm::erfc(-x * std::f64::consts::FRAC_1_SQRT_2);
+    let pdf = |x: f64| (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let (alpha, beta) = ((lo - mu) / sigma, (hi - mu) / sigma);
+    let (below, above) = (cdf(alpha), cdf(-beta));
+    let mean =
+        lo * below + hi * above + mu * (1.0 - below - above) + sigma * (pdf(alpha) - pdf(beta));
+    mean.clamp(lo, hi)
+}
+
 /// K-MAC: target joint positions → muscle controls.
 #[derive(Debug, Clone)]
 pub struct Kmac {
@@ -72,6 +89,10 @@ pub struct Kmac {
     pub activation_clamp: Option<[f64; 2]>,
     /// Training noise on the activations: σ and its seeded stream (the official code's 0.1).
     activation_noise: Option<(f64, sim::rng::Rng)>,
+    /// Play: the σ of the activation noise the policy was trained with, played as its expectation
+    /// (each control is [`clamped_normal_mean`] of the noiseless one, deterministic); ignored while
+    /// training noise is drawn.
+    pub expected_activation_noise: Option<f64>,
     target: MuscleGeometry,
     current: MuscleGeometry,
     qpos_target: Vec<f64>,
@@ -85,6 +106,7 @@ impl Kmac {
             gains,
             activation_clamp: None,
             activation_noise: None,
+            expected_activation_noise: None,
             target: MuscleGeometry::new(model),
             current: MuscleGeometry::new(model),
             qpos_target: model.qpos0.clone(),
@@ -94,6 +116,12 @@ impl Kmac {
     /// K-MAC in the official code's form when `clamp` is given (see [`Kmac::activation_clamp`]).
     pub fn with_activation_clamp(mut self, clamp: Option<[f64; 2]>) -> Kmac {
         self.activation_clamp = clamp;
+        self
+    }
+
+    /// Plays the expectation of activation noise of `sigma` (see [`Kmac::expected_activation_noise`]).
+    pub fn with_expected_activation_noise(mut self, sigma: Option<f64>) -> Kmac {
+        self.expected_activation_noise = sigma.filter(|&s| s > 0.0);
         self
     }
 
@@ -128,12 +156,21 @@ impl Kmac {
                 Some((sigma, rng)) => *sigma * rng.normal(),
                 None => 0.0,
             };
-            ctrl[a] = match self.activation_clamp {
-                None if noise == 0.0 => muscle_pd_control(model, a, l_star, &now, &self.gains, dt),
-                None => (muscle_pd_control(model, a, l_star, &now, &self.gains, dt) + noise)
-                    .clamp(0.0, 1.0),
-                Some([lo, hi]) => activation_target(model, a, l_star, &now, &self.gains)
-                    .map_or(0.0, |act| (act + noise).clamp(lo, hi)),
+            let (target, [lo, hi]) = match self.activation_clamp {
+                None => (
+                    Some(muscle_pd_control(model, a, l_star, &now, &self.gains, dt)),
+                    [0.0, 1.0],
+                ),
+                Some(bounds) => (
+                    activation_target(model, a, l_star, &now, &self.gains),
+                    bounds,
+                ),
+            };
+            ctrl[a] = match (target, self.expected_activation_noise) {
+                (None, _) => 0.0,
+                (Some(u), _) if noise != 0.0 => (u + noise).clamp(lo, hi),
+                (Some(u), Some(sigma)) => clamped_normal_mean(u, sigma, lo, hi),
+                (Some(u), None) => u.clamp(lo, hi),
             };
         }
         // The pelvis follows its servos.

@@ -18,7 +18,8 @@ mod muscle_pd;
 pub use direct::{direct_control, direct_controls};
 pub use dynsyn::Synergies;
 pub use kmac::{
-    activation_target, gravity_offset, muscle_pd_control, official_activation_clamp, Kmac,
+    activation_target, clamped_normal_mean, gravity_offset, muscle_pd_control,
+    official_activation_clamp, Kmac,
 };
 pub use muscle_pd::MusclePd;
 
@@ -173,6 +174,13 @@ pub enum ControllerSpec {
         /// checkpoints).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         activation_clamp: Option<[f64; 2]>,
+        /// The σ of the Gaussian noise on the activation targets the policy was trained with
+        /// (`activation_noise` of the training configuration). Before the clamp that noise is
+        /// rectified at the lower bound, so a muscle K-MAC leaves relaxed trains at a mean activation
+        /// of about σ/√(2π); in play each activation is that expectation, with no noise drawn
+        /// (see [`clamped_normal_mean`]). Absent: the activations as computed.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        activation_noise: Option<f64>,
     },
     /// Muscle-PD.
     MusclePd {
@@ -287,8 +295,11 @@ impl ActionMapper {
             ControllerSpec::Kmac {
                 gains,
                 activation_clamp,
+                activation_noise,
             } => ActionMapper::Kmac(Box::new(
-                Kmac::new(model, *gains).with_activation_clamp(*activation_clamp),
+                Kmac::new(model, *gains)
+                    .with_activation_clamp(*activation_clamp)
+                    .with_expected_activation_noise(*activation_noise),
             )),
             ControllerSpec::MusclePd { gains } => {
                 ActionMapper::MusclePd(Box::new(MusclePd::new(model, *gains)))

@@ -438,6 +438,8 @@ impl TrainConfig {
             Method::Kmac => ControllerSpec::Kmac {
                 gains: self.controller.kmac,
                 activation_clamp: self.controller.kmac_activation_clamp,
+                activation_noise: (self.controller.activation_noise > 0.0)
+                    .then_some(self.controller.activation_noise),
             },
             Method::Muscle => ControllerSpec::Direct,
             Method::MusclePd => ControllerSpec::MusclePd {

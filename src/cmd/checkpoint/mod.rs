@@ -225,6 +225,7 @@ fn template(
         "kmac" => ControllerSpec::Kmac {
             gains: PdGains { kp: 40.0, kd: 3.0 },
             activation_clamp: None,
+            activation_noise: None,
         },
         "muscle_pd" => ControllerSpec::MusclePd {
             gains: PdGains::MUSCLE_PD,
