@@ -1,6 +1,7 @@
 //! The markdown `rally reproduce` writes: Table I beside the paper's, where the activation goes,
 //! how the episodes ended, the checkpoints' provenance and the dual-rally section.
 
+use agents::controller::ControllerSpec;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -327,6 +328,17 @@ fn provenance(s: &mut String, rows: &[Row]) {
                 100.0 * t.hit_rate,
                 100.0 * t.success_rate
             );
+            if let Some(ControllerSpec::Kmac {
+                activation_noise: Some(sigma),
+                ..
+            }) = r.checkpoint.as_ref().map(|c| &c.controller)
+            {
+                let _ = writeln!(
+                    s,
+                    "  (trained with Gaussian noise σ {sigma} on its activation targets: it plays \
+                     each activation as the mean of the clamped noisy one, docs/design.md §6)"
+                );
+            }
         }
     }
 }
