@@ -24,6 +24,29 @@ fn ready(model: &Model) -> Vec<f64> {
     q
 }
 
+/// A robot at the ready posture and joint targets drawn uniformly within each joint's range.
+fn random_targets_at_ready(m: &Arc<Model>, seed: u64) -> (Robot, Vec<f64>) {
+    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
+    robot.reset(Some(&ready(m)));
+    let mut rng = Rng::seeded(seed);
+    let targets = ActionSpace::new(m)
+        .joints
+        .iter()
+        .map(|&j| {
+            let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
+            rng.uniform(r[0], r[1])
+        })
+        .collect();
+    (robot, targets)
+}
+
+/// K-MAC's controls for `targets` from the robot's state, one 10 ms control step.
+fn kmac_controls(m: &Model, robot: &Robot, targets: &[f64], kmac: &mut Kmac) -> Vec<f64> {
+    let mut ctrl = vec![0.0; m.actuators.len()];
+    kmac.controls(m, &robot.state, targets, 0.01, &mut ctrl);
+    ctrl
+}
+
 #[test]
 fn kmac_holds_the_ready_posture_against_gravity() {
     let m = model();
@@ -246,8 +269,7 @@ fn every_observation_and_action_entry_has_a_name() {
 #[test]
 fn kmac_in_the_official_form_sends_its_activation_targets_clamped_and_noise_is_seeded() {
     let m = model();
-    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
-    robot.reset(Some(&ready(&m)));
+    let (robot, targets) = random_targets_at_ready(&m, 9);
     let clamp = agents::controller::official_activation_clamp();
     assert!(
         (clamp[0] - 0.000_552_778_636_9).abs() < 1e-12
@@ -255,20 +277,7 @@ fn kmac_in_the_official_form_sends_its_activation_targets_clamped_and_noise_is_s
     );
     let gains = PdGains { kp: 10.0, kd: 1.0 };
     let space = ActionSpace::new(&m);
-    let mut rng = Rng::seeded(9);
-    let targets: Vec<f64> = space
-        .joints
-        .iter()
-        .map(|&j| {
-            let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
-            rng.uniform(r[0], r[1])
-        })
-        .collect();
-    let controls = |kmac: &mut Kmac| {
-        let mut ctrl = vec![0.0; m.actuators.len()];
-        kmac.controls(&m, &robot.state, &targets, 0.01, &mut ctrl);
-        ctrl
-    };
+    let controls = |kmac: &mut Kmac| kmac_controls(&m, &robot, &targets, kmac);
     let ours = controls(&mut Kmac::new(&m, gains));
     let official = controls(&mut Kmac::new(&m, gains).with_activation_clamp(Some(clamp)));
     // Each muscle's control is its activation target, within the clamp (ours inverts the
@@ -340,25 +349,11 @@ fn the_clamped_normal_mean_matches_its_closed_form_and_sampling() {
 #[test]
 fn kmac_plays_the_mean_of_the_activation_noise_it_was_trained_with() {
     let m = model();
-    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
-    robot.reset(Some(&ready(&m)));
+    let (robot, targets) = random_targets_at_ready(&m, 11);
     let clamp = agents::controller::official_activation_clamp();
     let gains = PdGains { kp: 10.0, kd: 1.0 };
     let space = ActionSpace::new(&m);
-    let mut rng = Rng::seeded(11);
-    let targets: Vec<f64> = space
-        .joints
-        .iter()
-        .map(|&j| {
-            let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
-            rng.uniform(r[0], r[1])
-        })
-        .collect();
-    let controls = |kmac: &mut Kmac| {
-        let mut ctrl = vec![0.0; m.actuators.len()];
-        kmac.controls(&m, &robot.state, &targets, 0.01, &mut ctrl);
-        ctrl
-    };
+    let controls = |kmac: &mut Kmac| kmac_controls(&m, &robot, &targets, kmac);
     let official = || Kmac::new(&m, gains).with_activation_clamp(Some(clamp));
     let plain = controls(&mut official());
     let expected = controls(&mut official().with_expected_activation_noise(Some(0.1)));

@@ -331,20 +331,33 @@ fn each_ablation_is_observed_rewarded_and_recorded_as_configured() {
             let recorded = ck.training.as_ref().unwrap().ablation;
             let full = command == CommandVariant::Full && task_reward;
             assert_eq!(recorded, (!full).then_some(ablation));
-            let text = serde_json::to_string(&ck).unwrap();
-            let back = agents::checkpoint::Checkpoint::from_json(&text, &m).unwrap();
-            let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(back));
-            let e = agents::eval::Evaluation {
-                model: m.clone(),
-                config: sim::config::ArenaConfig::default(),
-                preset: sim::arena::MYOCHALLENGE,
-                kind: sim::serve::ServeKind::P2,
-                episodes: 2,
-                seed: 1,
-            };
-            agents::eval::evaluate(&e, &spec, &|| {}).unwrap();
+            round_trip_and_play(&m, &ck);
         }
     }
+}
+
+/// The checkpoint read back from its JSON, after it played two P2 serves.
+fn round_trip_and_play(
+    m: &Arc<sim::model::Model>,
+    ck: &agents::checkpoint::Checkpoint,
+) -> Arc<agents::checkpoint::Checkpoint> {
+    let text = serde_json::to_string(ck).unwrap();
+    let back = Arc::new(agents::checkpoint::Checkpoint::from_json(&text, m).unwrap());
+    let e = agents::eval::Evaluation {
+        model: m.clone(),
+        config: sim::config::ArenaConfig::default(),
+        preset: sim::arena::MYOCHALLENGE,
+        kind: sim::serve::ServeKind::P2,
+        episodes: 2,
+        seed: 1,
+    };
+    agents::eval::evaluate(
+        &e,
+        &agents::factory::PlayerSpec::Checkpoint(back.clone()),
+        &|| {},
+    )
+    .unwrap();
+    back
 }
 
 #[test]
@@ -356,19 +369,8 @@ fn every_method_trains_and_exports_a_checkpoint_that_plays() {
         let ck = t.checkpoint("probe", "test", "none").unwrap();
         ck.validate(&m)
             .unwrap_or_else(|e| panic!("{method:?}: {e}"));
-        let text = serde_json::to_string(&ck).unwrap();
-        let back = agents::checkpoint::Checkpoint::from_json(&text, &m).unwrap();
+        let back = round_trip_and_play(&m, &ck);
         assert_eq!(back.training.as_ref().unwrap().method, method.name());
-        let spec = agents::factory::PlayerSpec::Checkpoint(Arc::new(back));
-        let e = agents::eval::Evaluation {
-            model: m.clone(),
-            config: sim::config::ArenaConfig::default(),
-            preset: sim::arena::MYOCHALLENGE,
-            kind: sim::serve::ServeKind::P2,
-            episodes: 2,
-            seed: 1,
-        };
-        agents::eval::evaluate(&e, &spec, &|| {}).unwrap();
     }
 }
 

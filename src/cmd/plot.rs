@@ -98,19 +98,7 @@ pub fn learning_curves(series: &[Series], out: &Path) -> Result<(), String> {
         } else {
             (0.0, 1.0)
         };
-        let mut chart = ChartBuilder::on(panel)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(36)
-            .y_label_area_size(52)
-            .build_cartesian_2d(0.0..max_steps / 1e6, lo..hi)
-            .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .x_desc("control steps (millions)")
-            .label_style(("sans-serif", 13))
-            .draw()
-            .map_err(|e| e.to_string())?;
+        let mut chart = steps_chart(panel, (title, 20), max_steps, lo..hi)?;
         for (k, s) in series.iter().enumerate() {
             let colour = COLOURS[k % COLOURS.len()];
             chart
@@ -124,20 +112,58 @@ pub fn learning_curves(series: &[Series], out: &Path) -> Result<(), String> {
                 ))
                 .map_err(|e| e.to_string())?
                 .label(s.label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
+                .legend(legend_line(colour));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .position(SeriesLabelPosition::LowerRight)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        draw_legend(&mut chart, SeriesLabelPosition::LowerRight)?;
     }
     root.present().map_err(|e| e.to_string())
+}
+
+/// A panel's chart against control steps (millions): its caption (text, size), the steps' range up
+/// to `max_steps`, `y`, and the mesh.
+fn steps_chart<'a, 'b>(
+    panel: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    caption: (&str, u32),
+    max_steps: f64,
+    y: std::ops::Range<f64>,
+) -> Result<StepsChart<'a, 'b>, String> {
+    let mut chart = ChartBuilder::on(panel)
+        .caption(caption.0, ("sans-serif", caption.1))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(52)
+        .build_cartesian_2d(0.0..max_steps / 1e6, y)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc("control steps (millions)")
+        .label_style(("sans-serif", 13))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    Ok(chart)
+}
+
+type StepsChart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<Coord, Coord>>;
+type Coord = plotters::coord::types::RangedCoordf64;
+
+/// A legend entry's short line in `colour`.
+fn legend_line(colour: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+}
+
+/// The legend box of a chart's labelled series, at `position`.
+fn draw_legend<'a, 'b: 'a>(
+    chart: &mut StepsChart<'a, 'b>,
+    position: SeriesLabelPosition,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .position(position)
+        .draw()
+        .map_err(|e| e.to_string())
 }
 
 /// One variant's learning curves, one per seed: (env steps, hit rate, success rate) points.
@@ -201,19 +227,7 @@ pub fn ablation_curves(variants: &[SeedCurves], out: &Path) -> Result<(), String
         ("success rate (training), mean ± std over seeds", |p| p.2),
     ];
     for (panel, (title, pick)) in panels.iter().zip(metrics) {
-        let mut chart = ChartBuilder::on(panel)
-            .caption(title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(36)
-            .y_label_area_size(52)
-            .build_cartesian_2d(0.0..max_steps / 1e6, 0.0..1.0)
-            .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .x_desc("control steps (millions)")
-            .label_style(("sans-serif", 13))
-            .draw()
-            .map_err(|e| e.to_string())?;
+        let mut chart = steps_chart(panel, (title, 18), max_steps, 0.0..1.0)?;
         for (k, v) in variants.iter().enumerate() {
             let colour = COLOURS[k % COLOURS.len()];
             let band = seed_band(&v.seeds, max_steps, 60, pick);
@@ -239,18 +253,9 @@ pub fn ablation_curves(variants: &[SeedCurves], out: &Path) -> Result<(), String
                 ))
                 .map_err(|e| e.to_string())?
                 .label(v.label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
+                .legend(legend_line(colour));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(|e| e.to_string())?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     }
     root.present().map_err(|e| e.to_string())
 }
