@@ -110,6 +110,11 @@ fn the_myochallenge_configuration_is_the_default_but_for_kmac_noise_schedule_and
         ) => assert_eq!(sigma, 0.1),
         other => panic!("{other:?}"),
     }
+    // The rally environment draws no training noise: a configuration asking for it there is refused.
+    let mut rally = c.clone();
+    rally.env = agents::ppo::TrainEnv::Rally;
+    let e = rally.validate().unwrap_err();
+    assert!(e.contains("controller.activation_noise"), "{e}");
     c.controller.action_noise = 0.0;
     c.controller.activation_noise = 0.0;
     assert_eq!(c.ppo.schedule, agents::ppo::Schedule::LinearDecay);

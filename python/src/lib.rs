@@ -295,8 +295,9 @@ impl VecEnv {
 }
 
 /// A checkpoint (its JSON text) around an ONNX network trained elsewhere, as `rally checkpoint
-/// from-onnx` writes it: `method`'s controller (gains, K-MAC's clamp and the grip floor from
-/// `config`, a `rally train` configuration file, or its defaults), `obs_mean` and `obs_std` applied
+/// from-onnx` writes it: `method`'s controller (gains, K-MAC's clamp, its activation noise, played
+/// as its expectation, and the grip floor from `config`, a `rally train` configuration file, or
+/// its defaults), `obs_mean` and `obs_std` applied
 /// before the network (both or neither), validated against the robot `model` first.
 #[pyfunction]
 #[pyo3(signature = (onnx, method, name, model="default", obs_mean=None, obs_std=None, config=None))]

@@ -61,10 +61,10 @@ pub fn official_activation_clamp() -> [f64; 2] {
 
 /// `E[clamp(mu + sigma·Z, lo, hi)]` for a standard normal `Z`: the mean control that Gaussian noise
 /// of `sigma` on `mu` gives once clamped (the noise is rectified at the bounds, so the mean moves
-/// towards the interval's inside: `mu = lo` becomes about `lo + sigma/√(2π)`). `sigma = 0`: the
-/// clamp itself.
+/// towards the interval's inside: `mu = lo` becomes about `lo + sigma/√(2π)`). `sigma` not a
+/// positive finite number: the clamp itself.
 pub fn clamped_normal_mean(mu: f64, sigma: f64, lo: f64, hi: f64) -> f64 {
-    if sigma <= 0.0 {
+    if !(sigma > 0.0 && sigma.is_finite()) {
         return mu.clamp(lo, hi);
     }
     let cdf = |x: f64| 0.5 * libm::erfc(-x * std::f64::consts::FRAC_1_SQRT_2);
@@ -90,8 +90,9 @@ pub struct Kmac {
     /// Training noise on the activations: σ and its seeded stream (the official code's 0.1).
     activation_noise: Option<(f64, sim::rng::Rng)>,
     /// Play: the σ of the activation noise the policy was trained with, played as its expectation
-    /// (each control is [`clamped_normal_mean`] of the noiseless one, deterministic); ignored while
-    /// training noise is drawn.
+    /// (each control is [`clamped_normal_mean`] of the noiseless one, deterministic: the mean
+    /// control of training, a first-order match of its activations, whose dynamics rise faster than
+    /// they fall); ignored while training noise is drawn.
     pub expected_activation_noise: Option<f64>,
     target: MuscleGeometry,
     current: MuscleGeometry,
@@ -121,7 +122,7 @@ impl Kmac {
 
     /// Plays the expectation of activation noise of `sigma` (see [`Kmac::expected_activation_noise`]).
     pub fn with_expected_activation_noise(mut self, sigma: Option<f64>) -> Kmac {
-        self.expected_activation_noise = sigma.filter(|&s| s > 0.0);
+        self.expected_activation_noise = sigma.filter(|&s| s > 0.0 && s.is_finite());
         self
     }
 
@@ -168,7 +169,7 @@ impl Kmac {
             };
             ctrl[a] = match (target, self.expected_activation_noise) {
                 (None, _) => 0.0,
-                (Some(u), _) if noise != 0.0 => (u + noise).clamp(lo, hi),
+                (Some(u), _) if self.activation_noise.is_some() => (u + noise).clamp(lo, hi),
                 (Some(u), Some(sigma)) => clamped_normal_mean(u, sigma, lo, hi),
                 (Some(u), None) => u.clamp(lo, hi),
             };

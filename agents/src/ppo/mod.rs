@@ -528,10 +528,18 @@ impl TrainConfig {
                 (0.0..=1.0).contains(&self.controller.activation_noise),
             ),
         ];
-        match checks.iter().find(|(_, ok)| !ok) {
-            Some((field, _)) => Err(format!("{field}: out of range")),
-            None => Ok(()),
+        if let Some((field, _)) = checks.iter().find(|(_, ok)| !ok) {
+            return Err(format!("{field}: out of range"));
         }
+        let noise = self.controller.action_noise > 0.0 || self.controller.activation_noise > 0.0;
+        if self.env == TrainEnv::Rally && noise {
+            return Err(
+                "controller.action_noise, controller.activation_noise: the rally \
+                        environment draws no training noise; set both to 0 to train in it"
+                    .into(),
+            );
+        }
+        Ok(())
     }
 }
 

@@ -82,7 +82,9 @@ enum CheckpointCommand {
         #[arg(long)]
         method: String,
         /// `rally train`'s configuration whose [controller] section to use (gains, K-MAC's
-        /// activation clamp, grip floor; default: the built-in defaults).
+        /// activation clamp and activation noise — a K-MAC trained with that noise plays its
+        /// expectation; set it to 0 to play the activations as computed — and the grip floor;
+        /// default: the built-in defaults).
         #[arg(long)]
         config: Option<PathBuf>,
         /// JSON {"mean": [...], "std": [...]} applied to the observation before the network, as
