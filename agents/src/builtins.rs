@@ -26,10 +26,16 @@ pub const CHECKPOINTS: &[(&str, &str)] = &[
 
 /// Every file of `config/checkpoints/myochallenge/`, MyoSuite's robot's, as [`CHECKPOINTS`] lists
 /// the default robot's. A test holds this list to the directory.
-pub const MYOCHALLENGE_CHECKPOINTS: &[(&str, &str)] = &[(
-    "kmac",
-    include_str!("../../config/checkpoints/myochallenge/kmac.json"),
-)];
+pub const MYOCHALLENGE_CHECKPOINTS: &[(&str, &str)] = &[
+    (
+        "kmac",
+        include_str!("../../config/checkpoints/myochallenge/kmac.json"),
+    ),
+    (
+        "muscle-ppo",
+        include_str!("../../config/checkpoints/myochallenge/muscle-ppo.json"),
+    ),
+];
 
 /// The built-in checkpoints of robot `robot` ([`sim::config::robot_name`]).
 pub fn of_robot(robot: &str) -> &'static [(&'static str, &'static str)] {
