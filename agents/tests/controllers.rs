@@ -28,16 +28,20 @@ fn ready(model: &Model) -> Vec<f64> {
 fn random_targets_at_ready(m: &Arc<Model>, seed: u64) -> (Robot, Vec<f64>) {
     let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
     robot.reset(Some(&ready(m)));
-    let mut rng = Rng::seeded(seed);
-    let targets = ActionSpace::new(m)
+    let targets = random_targets(m, &ActionSpace::new(m), &mut Rng::seeded(seed));
+    (robot, targets)
+}
+
+/// A target for each of `space`'s joints, uniform within its range.
+fn random_targets(m: &Model, space: &ActionSpace, rng: &mut Rng) -> Vec<f64> {
+    space
         .joints
         .iter()
         .map(|&j| {
             let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
             rng.uniform(r[0], r[1])
         })
-        .collect();
-    (robot, targets)
+        .collect()
 }
 
 /// K-MAC's controls for `targets` from the robot's state, one 10 ms control step.
@@ -92,14 +96,7 @@ fn no_controller_asks_a_muscle_to_push_or_leaves_0_1() {
     let mut ctrl = vec![0.0; m.actuators.len()];
     for step in 0..200 {
         // Random targets inside the joint ranges (and random lengths inside the length ranges).
-        let targets: Vec<f64> = space
-            .joints
-            .iter()
-            .map(|&j| {
-                let r = m.joints[j].range.unwrap_or([-1.0, 1.0]);
-                rng.uniform(r[0], r[1])
-            })
-            .collect();
+        let targets = random_targets(&m, &space, &mut rng);
         match step % 3 {
             0 => kmac.controls(&m, &robot.state, &targets, 0.01, &mut ctrl),
             1 => {
