@@ -222,18 +222,21 @@ struct Piece {
 pub struct TendonKinematics {
     /// Lengths, m.
     pub length: Vec<f64>,
-    /// Moment arms, ntendon × nv (row per tendon), m or m/m.
-    pub moment: DMatrix<f64>,
+    /// Moment arms, ntendon × nv, stored by tendon ([`TendonKinematics::moment_arms`]), m or m/m.
+    moment: Vec<f64>,
+    nv: usize,
     /// For each tendon, the degrees of freedom where its moment arm can be non-zero.
     pub dofs: Vec<Vec<usize>>,
     pieces: Vec<Piece>,
 }
 
 /// One piece's path at a configuration: its points (site, site when straight; site, tangent,
-/// tangent, site over a geom) and its length.
+/// tangent, site over a geom), its length, and the lengths of its straight parts (site → site;
+/// or site → tangent and tangent → site).
 struct PiecePath {
     points: [V3; 4],
     length: f64,
+    straight: [f64; 2],
 }
 
 impl TendonKinematics {
@@ -297,7 +300,8 @@ impl TendonKinematics {
         }
         TendonKinematics {
             length: vec![0.0; model.tendons.len()],
-            moment: DMatrix::zeros(model.tendons.len(), model.nv),
+            moment: vec![0.0; model.tendons.len() * model.nv],
+            nv: model.nv,
             dofs,
             pieces,
         }
@@ -317,17 +321,20 @@ impl TendonKinematics {
             if let Some(wr) = wrap::wrap(&p0, &p1, &center, &rot, g.radius, g.shape, side.as_ref())
             {
                 let [t0, t1] = wr.points;
-                let length = (t0 - p0).norm() + wr.length + (p1 - t1).norm();
+                let straight = [(t0 - p0).norm(), (p1 - t1).norm()];
                 let path = PiecePath {
                     points: [p0, t0, t1, p1],
-                    length,
+                    length: straight[0] + wr.length + straight[1],
+                    straight,
                 };
                 return (path, Some(w));
             }
         }
+        let length = (p1 - p0).norm();
         let path = PiecePath {
             points: [p0, p1, p1, p1],
-            length: (p1 - p0).norm(),
+            length,
+            straight: [length, 0.0],
         };
         (path, None)
     }
@@ -343,16 +350,19 @@ impl TendonKinematics {
 
     /// Recomputes lengths and moment arms from the frames in `kin`.
     pub fn update(&mut self, _model: &Model, kin: &Kinematics) {
+        let nv = self.nv;
         for (t, dofs) in self.dofs.iter().enumerate() {
             self.length[t] = 0.0;
+            let row = &mut self.moment[t * nv..(t + 1) * nv];
             for &d in dofs {
-                self.moment[(t, d)] = 0.0;
+                row[d] = 0.0;
             }
         }
         for piece in &self.pieces {
             let (path, wrapped) = Self::path(piece, kin);
             let t = piece.tendon;
             self.length[t] += path.length;
+            let row = &mut self.moment[t * nv..(t + 1) * nv];
             let p = &path.points;
             // The straight pieces: site → site, or site → tangent and tangent → site (the arc
             // between the tangents lies on one body).
@@ -366,25 +376,32 @@ impl TendonKinematics {
                 }
                 let (a, b) = (p[k], p[k + 1]);
                 // The piece's direction; (1, 0, 0) for a piece of no length, as MuJoCo.
-                let v = b - a;
-                let l = v.norm();
-                let u = if l < wrap::MINVAL { V3::x() } else { v / l };
+                let l = path.straight[k / 2];
+                let u = if l < wrap::MINVAL {
+                    V3::x()
+                } else {
+                    (b - a) / l
+                };
                 for &d in &link.dofs1 {
-                    self.moment[(t, d)] += u.dot(&kin.point_velocity(d, &b));
+                    row[d] += u.dot(&kin.point_velocity(d, &b));
                 }
                 for &d in &link.dofs0 {
-                    self.moment[(t, d)] -= u.dot(&kin.point_velocity(d, &a));
+                    row[d] -= u.dot(&kin.point_velocity(d, &a));
                 }
             }
         }
     }
 
+    /// Tendon `t`'s moment arms, one per degree of freedom (nv; zero outside
+    /// `dofs[t]`).
+    pub fn moment_arms(&self, t: usize) -> &[f64] {
+        &self.moment[t * self.nv..(t + 1) * self.nv]
+    }
+
     /// Velocity of tendon `t` for joint velocities `qvel`.
     pub fn velocity(&self, t: usize, qvel: &[f64]) -> f64 {
-        self.dofs[t]
-            .iter()
-            .map(|&d| self.moment[(t, d)] * qvel[d])
-            .sum()
+        let moment = self.moment_arms(t);
+        self.dofs[t].iter().map(|&d| moment[d] * qvel[d]).sum()
     }
 }
 

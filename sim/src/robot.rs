@@ -335,9 +335,12 @@ impl Robot {
         let h = self.held_model.timestep;
         let mut event = None;
         if self.phase == GripPhase::Held {
-            // The grip's capacity now: today's activations on the last step's muscle lengths.
-            dynamics::actuate(&self.held_model, &mut self.data, &self.state);
-            self.capacity = self.grip_capacity();
+            // The grip's capacity now: today's activations on the last step's muscle lengths
+            // (the grip muscles' forces alone; the step below computes every force).
+            let forces = self.grip_muscles.iter().map(|&a| {
+                dynamics::actuator_force_now(&self.held_model, &self.data, &self.state, a).abs()
+            });
+            self.capacity = self.params.friction * forces.sum::<f64>();
             event = self.check_hold(h);
         }
         let model = match self.phase {

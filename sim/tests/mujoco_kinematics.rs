@@ -100,7 +100,7 @@ pub fn actuator_moments(model: &Model, ten: &TendonKinematics) -> DMatrix<f64> {
     let mut out = DMatrix::zeros(model.actuators.len(), model.nv);
     for (a, act) in model.actuators.iter().enumerate() {
         match act.transmission {
-            Transmission::Tendon(t) => out.set_row(a, &ten.moment.row(t)),
+            Transmission::Tendon(t) => out.row_mut(a).copy_from_slice(ten.moment_arms(t)),
             Transmission::Joint(j) => out[(a, model.joints[j].dof_adr)] = 1.0,
         }
     }
@@ -498,7 +498,7 @@ fn wrap_cases_match_mujoco() {
         let theirs = nums(&c["moment"]);
         let scale = theirs.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-3);
         let diff = (0..model.nv)
-            .map(|d| (ten.moment[(0, d)] - theirs[d]).abs())
+            .map(|d| (ten.moment_arms(0)[d] - theirs[d]).abs())
             .fold(0.0, f64::max)
             / scale;
         let inside = c["side"] == "inside" && c["wrapped"] == true;
@@ -512,7 +512,7 @@ fn wrap_cases_match_mujoco() {
             "case {i} ({} {} side): moment arms differ by {diff:.2e} of the largest\nours {:?}\nMuJoCo {theirs:?}",
             c["shape"],
             c["side"],
-            ten.moment.row(0)
+            ten.moment_arms(0)
         );
         worst_len = worst_len.max(rel);
         if inside {

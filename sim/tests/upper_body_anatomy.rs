@@ -78,7 +78,7 @@ fn moment(m: &Model, ten: &TendonKinematics, muscle: &str, joint: &str) -> f64 {
         .unwrap_or_else(|| panic!("no muscle {muscle}"));
     let j = m.joint(joint).unwrap_or_else(|| panic!("no joint {joint}"));
     match m.actuators[a].transmission {
-        Transmission::Tendon(t) => ten.moment[(t, m.joints[j].dof_adr)],
+        Transmission::Tendon(t) => ten.moment_arms(t)[m.joints[j].dof_adr],
         Transmission::Joint(_) => panic!("{muscle} is not on a tendon"),
     }
 }

@@ -218,10 +218,10 @@ pub fn gravity_offset(
         };
         let c = 0.5 * p.peak_force(0.0) * gains.kp
             / (act.lengthrange[1] - act.lengthrange[0]).max(1e-9);
-        let dofs = &data.ten.dofs[t];
+        let (dofs, moment) = (&data.ten.dofs[t], data.ten.moment_arms(t));
         for &i in dofs {
             for &j in dofs {
-                k[(i, j)] += c * data.ten.moment[(t, i)] * data.ten.moment[(t, j)];
+                k[(i, j)] += c * moment[i] * moment[j];
             }
         }
     }

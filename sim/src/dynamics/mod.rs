@@ -366,30 +366,37 @@ fn actuator_force(model: &Model, i: usize, len: f64, vel: f64, act: f64, ctrl: f
     gain * input + bias
 }
 
+/// Actuator `i`'s force at the actuator length and velocity in `data` and the activation and
+/// control in `state` (the control clamped to its range): what [`actuate`] writes to
+/// `data.actuator_force[i]`.
+pub fn actuator_force_now(model: &Model, data: &Data, state: &State, i: usize) -> f64 {
+    let ctrl = match model.actuators[i].ctrlrange {
+        Some([lo, hi]) => state.ctrl[i].clamp(lo, hi),
+        None => state.ctrl[i],
+    };
+    actuator_force(
+        model,
+        i,
+        data.actuator_length[i],
+        data.actuator_velocity[i],
+        state.act[i],
+        ctrl,
+    )
+}
+
 /// Actuator forces (`data.actuator_force`) and their generalised force (`data.actuation`) from the
 /// actuator lengths and velocities in `data` and the activations and controls in `state` (MuJoCo's
 /// `mj_fwdActuation`; controls clamped to their ranges).
 pub fn actuate(model: &Model, data: &mut Data, state: &State) {
     data.actuation.fill(0.0);
     for i in 0..model.actuators.len() {
-        let a = &model.actuators[i];
-        let ctrl = match a.ctrlrange {
-            Some([lo, hi]) => state.ctrl[i].clamp(lo, hi),
-            None => state.ctrl[i],
-        };
-        let f = actuator_force(
-            model,
-            i,
-            data.actuator_length[i],
-            data.actuator_velocity[i],
-            state.act[i],
-            ctrl,
-        );
+        let f = actuator_force_now(model, data, state, i);
         data.actuator_force[i] = f;
-        match a.transmission {
+        match model.actuators[i].transmission {
             Transmission::Tendon(t) => {
+                let moment = data.ten.moment_arms(t);
                 for &d in &data.ten.dofs[t] {
-                    data.actuation[d] += data.ten.moment[(t, d)] * f;
+                    data.actuation[d] += moment[d] * f;
                 }
             }
             Transmission::Joint(j) => data.actuation[model.joints[j].dof_adr] += f,

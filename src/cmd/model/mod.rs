@@ -163,7 +163,7 @@ fn kinematics_json(m: &Model, qpos: &[f64]) -> Value {
         .muscles()
         .map(|(_, a)| {
             let moment: Vec<f64> = match a.transmission {
-                Transmission::Tendon(t) => ten.moment.row(t).iter().copied().collect(),
+                Transmission::Tendon(t) => ten.moment_arms(t).to_vec(),
                 Transmission::Joint(j) => {
                     let mut row = vec![0.0; m.nv];
                     row[m.joints[j].dof_adr] = 1.0;
