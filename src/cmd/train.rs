@@ -133,8 +133,12 @@ fn status_line(r: &CurveRow, steps_per_s: f64, env: TrainEnv) -> String {
         TrainEnv::Single => String::new(),
         TrainEnv::Rally => format!("  rally {:.2}  in box {:.2}", r.rally_length, r.dual),
     };
+    let skipped = match r.skipped_steps {
+        0 => String::new(),
+        n => format!("  ({n} non-finite steps skipped)"),
+    };
     format!(
-        "{:>7.0} steps/s  reward {:>7.1}  hit {:>5.1}%  success {:>5.1}%{rally}  lr {:.1e}  kl {:.4}",
+        "{:>7.0} steps/s  reward {:>7.1}  hit {:>5.1}%  success {:>5.1}%{rally}  lr {:.1e}  kl {:.4}{skipped}",
         steps_per_s,
         r.reward,
         100.0 * r.hit_rate,

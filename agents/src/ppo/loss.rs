@@ -22,14 +22,25 @@ pub fn entropy(log_std: &Tensor) -> Result<Tensor> {
     log_std.sum_all()? + n * (0.5 + HALF_LN_2PI)
 }
 
+/// The bound on `logp − old_logp` in [`surrogate_loss`]: ρ stays within [e^−20, e^20] ≈
+/// [2·10⁻⁹, 5·10⁸].
+pub const MAX_LOG_RATIO: f64 = 20.0;
+
 /// The clipped surrogate `mean(max(−A·ρ, −A·clip(ρ, 1 − ε, 1 + ε)))`, `ρ = exp(logp − old_logp)`.
+///
+/// `logp − old_logp` is held within ±[`MAX_LOG_RATIO`] before the exponential: summed over a few
+/// hundred action entries, one large update can take it past 88.7, where f32's `exp` overflows,
+/// and an infinite ρ makes the whole gradient NaN (a Muscle-PD run on MyoSuite's robot lost its
+/// policy so at 3.6 M steps). Past the bound a row gives no gradient, as a clipped row gives none.
 pub fn surrogate_loss(
     logp: &Tensor,
     old_logp: &Tensor,
     advantages: &Tensor,
     clip: f64,
 ) -> Result<Tensor> {
-    let ratio = (logp - old_logp)?.exp()?;
+    let ratio = (logp - old_logp)?
+        .clamp(-MAX_LOG_RATIO, MAX_LOG_RATIO)?
+        .exp()?;
     let unclipped = (advantages.neg()? * &ratio)?;
     let clipped = (advantages.neg()? * ratio.clamp(1.0 - clip, 1.0 + clip)?)?;
     unclipped.maximum(&clipped)?.mean_all()
@@ -91,6 +102,29 @@ mod tests {
 
     fn scalar(x: &Tensor) -> f32 {
         x.to_scalar::<f32>().unwrap()
+    }
+
+    #[test]
+    fn a_ratio_past_f32s_range_gives_a_finite_loss_and_no_gradient() {
+        // logp − old_logp = 200: exp would overflow to inf, and with A < 0 the unclipped −A·ρ
+        // would be the larger term: the loss and its gradient would be inf and NaN.
+        let x = Var::from_tensor(&t(&[200.0, 0.1])).unwrap();
+        let l = surrogate_loss(x.as_tensor(), &t(&[0.0, 0.0]), &t(&[-1.0, -1.0]), 0.2).unwrap();
+        let want = (MAX_LOG_RATIO.exp() + 0.1f64.exp()) / 2.0;
+        assert!(
+            (scalar(&l) as f64 / want - 1.0).abs() < 1e-5,
+            "{}",
+            scalar(&l)
+        );
+        let g = l
+            .backward()
+            .unwrap()
+            .get(&x)
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        assert_eq!(g[0], 0.0, "past the bound the row pulls on nothing");
+        assert!((g[1] as f64 - 0.1f64.exp() / 2.0).abs() < 1e-6, "{g:?}");
     }
 
     #[test]

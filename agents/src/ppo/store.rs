@@ -355,11 +355,11 @@ impl RunDir {
     /// Rewrites `curve.csv` from the rows.
     pub fn write_curve(&self, rows: &[CurveRow]) -> Result<(), String> {
         let mut out = String::from(
-            "iteration,env_steps,wall_s,episodes,reward,length,hit_rate,success_rate,mean_activation,tracking,learning_rate,kl,value_loss,surrogate_loss,entropy,std,rally_length,dual\n",
+            "iteration,env_steps,wall_s,episodes,reward,length,hit_rate,success_rate,mean_activation,tracking,learning_rate,kl,value_loss,surrogate_loss,entropy,std,rally_length,dual,skipped\n",
         );
         for r in rows {
             out.push_str(&format!(
-                "{},{},{:.3},{},{:.4},{:.2},{:.4},{:.4},{:.5},{:.5},{:.3e},{:.3e},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4}\n",
+                "{},{},{:.3},{},{:.4},{:.2},{:.4},{:.4},{:.5},{:.5},{:.3e},{:.3e},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4},{}\n",
                 r.iteration,
                 r.env_steps,
                 r.wall_s,
@@ -377,7 +377,8 @@ impl RunDir {
                 r.entropy,
                 r.std,
                 r.rally_length,
-                r.dual
+                r.dual,
+                r.skipped_steps
             ));
         }
         write_atomic(&self.curve_path(), out.as_bytes())

@@ -245,6 +245,13 @@ impl Trainer {
         let t2 = Instant::now();
         let adv = self.advantages(&rollout)?;
         let losses = self.update(&rollout, &adv, &log_std)?;
+        if !self.parameters_finite()? {
+            return Err(format!(
+                "iteration {}: the network's parameters are no longer finite (nothing of this \
+                 iteration is saved; --resume continues from the last saved state)",
+                self.progress.iteration + 1
+            ));
+        }
         self.timing.update += t2.elapsed().as_secs_f64();
         let n = rollout.len() as u64;
         self.timing.env_steps += n;
@@ -254,6 +261,21 @@ impl Trainer {
         let row = self.curve_row(&losses, rollout.tracking)?;
         self.progress.curve.push(row);
         Ok(row)
+    }
+
+    /// Whether every parameter of the policy and critic is finite.
+    fn parameters_finite(&self) -> Result<bool, String> {
+        for v in self.net.vars() {
+            let sum = v.as_tensor().abs().and_then(|t| t.sum_all());
+            if !sum
+                .and_then(|t| t.to_scalar::<f32>())
+                .map_err(e)?
+                .is_finite()
+            {
+                return Ok(false);
+            }
+        }
+        Ok(true)
     }
 
     /// The `linear_decay` schedule's rate at the steps done: `learning_rate` scaled by the share
@@ -310,6 +332,7 @@ impl Trainer {
             std: mean_of(std_now.iter().map(|&s| s as f64)),
             rally_length: mean_of(recent.iter().map(|s| s.rally_length as f64)),
             dual: mean_of(recent.iter().map(|s| s.dual)),
+            skipped_steps: losses.skipped,
         })
     }
 
@@ -343,6 +366,10 @@ impl Trainer {
             for k in 0..p.minibatches {
                 let batch = self.minibatch(rollout, adv, &order[k * mb..(k + 1) * mb])?;
                 let losses = self.step_on(&batch, old_log_std, &vars, &p)?;
+                if losses.skipped > 0 {
+                    sums.skipped += losses.skipped;
+                    continue;
+                }
                 sums.kl += losses.kl;
                 sums.surrogate += losses.surrogate;
                 sums.value += losses.value;
@@ -355,6 +382,7 @@ impl Trainer {
             surrogate: sums.surrogate / count,
             value: sums.value / count,
             entropy: sums.entropy / count,
+            skipped: sums.skipped,
         })
     }
 
@@ -426,7 +454,15 @@ impl Trainer {
             total = (total + (bound * p.bound_coef).map_err(e)?).map_err(e)?;
         }
         let mut grads = total.backward().map_err(e)?;
-        clip_grad_norm(&mut grads, vars, p.max_grad_norm).map_err(e)?;
+        let norm = clip_grad_norm(&mut grads, vars, p.max_grad_norm).map_err(e)?;
+        if !norm.is_finite() {
+            // Adam would carry the inf or NaN into every parameter it touches, for good: the
+            // step is skipped (the curve's `skipped` counts it), as mixed-precision scalers do.
+            return Ok(Losses {
+                skipped: 1,
+                ..Losses::default()
+            });
+        }
         self.adam.step(&grads).map_err(e)?;
         if let Some(cap) = p.std_cap(self.progress.env_steps) {
             let ls = &self.net.log_std;
@@ -439,6 +475,7 @@ impl Trainer {
             surrogate: f(&surrogate)?,
             value: f(&value)?,
             entropy: f(&entropy)?,
+            skipped: 0,
         })
     }
 }
@@ -462,4 +499,6 @@ struct Losses {
     surrogate: f64,
     value: f64,
     entropy: f64,
+    /// Minibatch steps skipped: their gradient was not finite (the means leave them out).
+    skipped: u64,
 }

@@ -67,6 +67,9 @@ pub struct CurveRow {
     /// Mean times per episode the `dual` term was paid, over the last episodes.
     #[serde(default)]
     pub dual: f64,
+    /// Minibatch steps of the update skipped because their gradient was not finite.
+    #[serde(default)]
+    pub skipped_steps: u64,
 }
 
 /// Where the time of the run went, s (this process only).
