@@ -317,13 +317,14 @@ impl Robot {
         &self.held_model
     }
 
-    /// Grip capacity, N: friction times the summed pull of the grip muscles.
-    fn grip_capacity(&self) -> f64 {
+    /// Grip capacity, N: friction times the summed pull of the grip muscles, each muscle's force
+    /// given by `force`.
+    fn grip_capacity(&self, force: impl Fn(usize) -> f64) -> f64 {
         self.params.friction
             * self
                 .grip_muscles
                 .iter()
-                .map(|&a| self.data.actuator_force[a].abs())
+                .map(|&a| force(a).abs())
                 .sum::<f64>()
     }
 
@@ -337,10 +338,9 @@ impl Robot {
         if self.phase == GripPhase::Held {
             // The grip's capacity now: today's activations on the last step's muscle lengths
             // (the grip muscles' forces alone; the step below computes every force).
-            let forces = self.grip_muscles.iter().map(|&a| {
-                dynamics::actuator_force_now(&self.held_model, &self.data, &self.state, a).abs()
+            self.capacity = self.grip_capacity(|a| {
+                dynamics::actuator_force_now(&self.held_model, &self.data, &self.state, a)
             });
-            self.capacity = self.params.friction * forces.sum::<f64>();
             event = self.check_hold(h);
         }
         let model = match self.phase {
@@ -356,7 +356,7 @@ impl Robot {
         };
         dynamics::step_with_force(&model, &mut self.data, &mut self.state, external.as_ref());
         if self.phase != GripPhase::Held {
-            self.capacity = self.grip_capacity();
+            self.capacity = self.grip_capacity(|a| self.data.actuator_force[a]);
         }
         let nominal = self.held_motion();
         match self.phase {
