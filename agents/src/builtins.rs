@@ -32,6 +32,10 @@ pub const MYOCHALLENGE_CHECKPOINTS: &[(&str, &str)] = &[
         include_str!("../../config/checkpoints/myochallenge/kmac.json"),
     ),
     (
+        "muscle-pd",
+        include_str!("../../config/checkpoints/myochallenge/muscle-pd.json"),
+    ),
+    (
         "muscle-ppo",
         include_str!("../../config/checkpoints/myochallenge/muscle-ppo.json"),
     ),

@@ -47,8 +47,8 @@ enum CheckpointCommand {
         name: String,
     },
     /// Print a built-in checkpoint (kmac, kmac-rally, muscle-ppo, muscle-pd, dynsyn; with `--model
-    /// myochallenge`, MyoSuite's robot's: kmac) as JSON: a trained policy to start from or to
-    /// submit under another name.
+    /// myochallenge`, those of MyoSuite's robot: an unknown name lists them) as JSON: a trained
+    /// policy to start from or to submit under another name.
     Builtin {
         /// Its name.
         name: String,
