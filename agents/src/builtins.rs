@@ -28,6 +28,10 @@ pub const CHECKPOINTS: &[(&str, &str)] = &[
 /// the default robot's. A test holds this list to the directory.
 pub const MYOCHALLENGE_CHECKPOINTS: &[(&str, &str)] = &[
     (
+        "dynsyn",
+        include_str!("../../config/checkpoints/myochallenge/dynsyn.json"),
+    ),
+    (
         "kmac",
         include_str!("../../config/checkpoints/myochallenge/kmac.json"),
     ),
