@@ -33,13 +33,14 @@ pub enum PlayerSpec {
 
 impl PlayerSpec {
     /// The same player without the Gaussian noise a trained checkpoint was trained with
-    /// (`policy_std`): it plays its network's mean action (named "… (mean action)"). A scripted
+    /// (`policy_std`, `action_noise`): it plays its network's mean action (named "… (mean action)"). A scripted
     /// player is unchanged.
     pub fn mean_action(self) -> PlayerSpec {
         match self {
             PlayerSpec::Checkpoint(c) => {
                 let mut c = (*c).clone();
                 c.policy_std = None;
+                c.action_noise = None;
                 c.name = format!("{} (mean action)", c.name);
                 PlayerSpec::Checkpoint(std::sync::Arc::new(c))
             }

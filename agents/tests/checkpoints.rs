@@ -57,6 +57,56 @@ fn templates_of_every_controller_validate_round_trip_and_play() {
     }
 }
 
+/// The controls a player for `spec` writes over one P2 episode of the default robot from `seed`.
+fn controls_of(m: &Arc<Model>, spec: &PlayerSpec, seed: u64) -> Vec<Vec<f64>> {
+    let preset = sim::arena::MYOCHALLENGE;
+    let mut env =
+        sim::episode::SingleServe::new(m.clone(), &sim::config::ArenaConfig::default(), preset)
+            .unwrap();
+    env.reset(ServeKind::P2, &mut sim::rng::Rng::seeded(seed), None);
+    let mut player = spec.build(m, &preset, seed).unwrap();
+    let mut trace = Vec::new();
+    agents::eval::play_traced(&mut env, player.as_mut(), Some(&mut trace));
+    trace.into_iter().map(|t| t.controls).collect()
+}
+
+#[test]
+fn a_checkpoint_plays_the_action_noise_it_was_trained_with_and_mean_action_drops_it() {
+    // Muscle-PPO's template acts 0 everywhere (control σ(−2.5) on every muscle). With `action_noise`
+    // the player adds that Gaussian to every action after the clip, as the training environment
+    // did: the controls move off that value, the same way for the same seed; the mean action
+    // (`rally eval --mean-action`) drops the noise again.
+    let m = model();
+    let plain = Checkpoint::template(&m, "t", ControllerSpec::Direct, &[8], Activation::Tanh);
+    let mut noisy = plain.clone();
+    noisy.action_noise = Some(0.05);
+    let text = serde_json::to_string(&noisy).unwrap();
+    assert!(
+        text.contains("\"action_noise\":0.05"),
+        "the field is written"
+    );
+    let noisy = Checkpoint::from_json(&text, &m).unwrap();
+    let (p, n) = (
+        PlayerSpec::Checkpoint(Arc::new(plain)),
+        PlayerSpec::Checkpoint(Arc::new(noisy)),
+    );
+    let (quiet, loud) = (controls_of(&m, &p, 3), controls_of(&m, &n, 3));
+    let muscles: Vec<usize> = m.muscles().map(|(i, _)| i).collect();
+    let spread = |c: &[Vec<f64>]| {
+        let xs = c.iter().flat_map(|s| muscles.iter().map(|&i| s[i]));
+        xs.clone().fold(f64::MIN, f64::max) - xs.fold(f64::MAX, f64::min)
+    };
+    assert_eq!(
+        spread(&quiet),
+        0.0,
+        "without noise every muscle gets the same control"
+    );
+    assert!(spread(&loud) > 1e-3, "{}", spread(&loud));
+    assert_eq!(loud, controls_of(&m, &n, 3), "deterministic per seed");
+    assert_ne!(loud, controls_of(&m, &n, 4));
+    assert_eq!(controls_of(&m, &n.clone().mean_action(), 3), quiet);
+}
+
 fn refused(m: &Model, ck: &Checkpoint, field: &str) {
     let text = serde_json::to_string(ck).unwrap();
     let e = Checkpoint::from_json(&text, m).expect_err("must be refused");
@@ -123,6 +173,11 @@ fn bad_checkpoints_are_refused_naming_the_field() {
         activation_noise: None,
     };
     refused(&m, &c, "controller.gains");
+    for sigma in [-0.1, 1.5, 1e300] {
+        let mut c = good.clone();
+        c.action_noise = Some(sigma);
+        refused(&m, &c, "action_noise");
+    }
     for sigma in [-0.1, 1.5, 1e300] {
         let mut c = good.clone();
         c.controller = ControllerSpec::Kmac {

@@ -31,6 +31,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
         policy: None,
         onnx: Some(OnnxPolicy::from_bytes(bytes)),
         policy_std: None,
+        action_noise: None,
         grip_floor: None,
         training: None,
     }

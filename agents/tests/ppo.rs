@@ -489,7 +489,9 @@ fn validation_plays_and_keeps_the_policy_at_its_noise_scale() {
         plain.checkpoint("v", "", "").unwrap(),
         "scale 1: as trained"
     );
+    assert_eq!(same.action_noise, None, "trained without action noise");
     cfg.validation.noise_scale = 0.5;
+    cfg.controller.action_noise = 0.05;
     let t = Trainer::new(model(), Method::Kmac, cfg.clone(), 4).unwrap();
     let (trained, played) = (
         t.checkpoint("v", "", "").unwrap(),
@@ -498,6 +500,16 @@ fn validation_plays_and_keeps_the_policy_at_its_noise_scale() {
     let (s0, s1) = (trained.policy_std.unwrap(), played.policy_std.unwrap());
     assert!(s0.iter().zip(&s1).all(|(a, b)| *b == 0.5 * a && *a > 0.0));
     assert_eq!(played.policy, trained.policy);
+    assert_eq!(
+        trained.action_noise,
+        Some(0.05),
+        "the training's action noise is recorded"
+    );
+    assert_eq!(
+        played.action_noise,
+        Some(0.025),
+        "and scaled with the policy's σ"
+    );
     assert_eq!(played.training.unwrap().noise_scale, Some(0.5));
     cfg.validation.noise_scale = -0.5;
     assert_eq!(

@@ -36,6 +36,7 @@ fuzz_target!(|data: &[u8]| {
         policy: None,
         onnx: Some(OnnxPolicy::from_bytes(data)),
         policy_std: None,
+        action_noise: None,
         grip_floor: None,
         training: None,
     };

@@ -78,6 +78,13 @@ pub struct Checkpoint {
     /// differ a lot — muscles only pull, so the noise itself stiffens the arm.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub policy_std: Option<Vec<f64>>,
+    /// The σ of the Gaussian noise training's environment added to every action after the policy's
+    /// own noise and the clip (`[controller] action_noise`, the official code's): the player adds
+    /// it the same way, `clip(a + σ·ε)` from the same stream, so that it plays as it was trained.
+    /// Absent: none. A policy can come to depend on it: one whose means lie far outside [−1, 1]
+    /// has no other variability on those entries (docs/training.md, DynSyn).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub action_noise: Option<f64>,
     /// Least control of the grip muscles (default none; see `controller::apply_grip_floor`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grip_floor: Option<f64>,
@@ -200,6 +207,9 @@ impl Checkpoint {
             )
         })?;
         std.iter_mut().for_each(|s| *s *= factor);
+        if let Some(sigma) = self.action_noise.as_mut() {
+            *sigma *= factor;
+        }
         if let Some(t) = self.training.as_mut() {
             t.noise_scale = Some(t.noise_scale.unwrap_or(1.0) * factor);
         }
@@ -324,6 +334,14 @@ impl Checkpoint {
                 return Err(bad(
                     "controller.synergies",
                     "group indices must be below `groups` (≥ 1)",
+                ));
+            }
+        }
+        if let Some(sigma) = self.action_noise {
+            if !(0.0..=1.0).contains(&sigma) {
+                return Err(bad(
+                    "action_noise",
+                    format!("{sigma}: must be a σ in [0, 1]"),
                 ));
             }
         }
@@ -501,6 +519,7 @@ impl Checkpoint {
             policy: Some(Mlp { layers }),
             onnx: None,
             policy_std: None,
+            action_noise: None,
             grip_floor: None,
             training: None,
         }
@@ -533,6 +552,7 @@ impl Checkpoint {
             policy: None,
             onnx: Some(OnnxPolicy::from_bytes(onnx)),
             policy_std: None,
+            action_noise: None,
             grip_floor,
             training: None,
         };

@@ -102,6 +102,11 @@ impl Player for CheckpointPlayer {
                 *a = (*a + s * self.noise.normal()).clamp(-1.0, 1.0);
             }
         }
+        if let Some(sigma) = self.checkpoint.action_noise.filter(|&s| s > 0.0) {
+            for a in action.iter_mut() {
+                *a = (*a + sigma * self.noise.normal()).clamp(-1.0, 1.0);
+            }
+        }
         let model = robot.held_model().clone();
         self.mapper
             .controls(&model, &robot.state, &action, sim::arena::CONTROL_DT, ctrl);

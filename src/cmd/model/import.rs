@@ -18,6 +18,11 @@ use super::data_dir;
 /// The MyoSuite release the import is written for.
 pub const MYOSUITE_VERSION: &str = "3.0.0";
 
+/// The MuJoCo release its own virtual environment gets (myosuite does not pin one): the one
+/// the simulator's MuJoCo fixtures were generated with, so that a later MuJoCo cannot change
+/// what the import compiles.
+pub const MUJOCO_VERSION: &str = "4.0.0";
+
 /// The import script, compiled in so that the binary needs no checkout.
 const IMPORT_SCRIPT: &str = include_str!("../../../tools/myosuite_import.py");
 
@@ -88,6 +93,20 @@ fn myosuite_version(python: &Path) -> Result<String, String> {
     Ok(String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
+/// The mujoco version `python` has installed, if it has one.
+fn mujoco_version(python: &Path) -> Option<String> {
+    let out = Command::new(python)
+        .args([
+            "-c",
+            "import importlib.metadata as m; print(m.version('mujoco'))",
+        ])
+        .output()
+        .ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
 /// `--python`: it must have the release the import is written for.
 fn given_python(python: &Path) -> Result<PathBuf, CliError> {
     let version = myosuite_version(python).map_err(|e| {
@@ -108,7 +127,10 @@ fn given_python(python: &Path) -> Result<PathBuf, CliError> {
 /// The virtual environment's Python, made and filled with myosuite when needed.
 fn venv_python(venv: &Path) -> Result<PathBuf, CliError> {
     let python = venv.join("bin").join("python");
-    if python.exists() && myosuite_version(&python).as_deref() == Ok(MYOSUITE_VERSION) {
+    if python.exists()
+        && myosuite_version(&python).as_deref() == Ok(MYOSUITE_VERSION)
+        && mujoco_version(&python).as_deref() == Some(MUJOCO_VERSION)
+    {
         return Ok(python);
     }
     if !python.exists() {
@@ -135,7 +157,7 @@ fn venv_python(venv: &Path) -> Result<PathBuf, CliError> {
         }
     }
     let bar = spinner(&format!(
-        "installing myosuite {MYOSUITE_VERSION} from PyPI into {} (a few minutes)",
+        "installing myosuite {MYOSUITE_VERSION} and mujoco {MUJOCO_VERSION} from PyPI into {} (a few minutes)",
         venv.display()
     ));
     let out = Command::new(&python)
@@ -147,12 +169,13 @@ fn venv_python(venv: &Path) -> Result<PathBuf, CliError> {
             "--quiet",
         ])
         .arg(format!("myosuite=={MYOSUITE_VERSION}"))
+        .arg(format!("mujoco=={MUJOCO_VERSION}"))
         .output();
     bar.finish_and_clear();
     let out = out.with_context(|| format!("cannot run {}", python.display()))?;
     if !out.status.success() {
         return Err(CliError::Failed(anyhow::anyhow!(
-            "pip install myosuite=={MYOSUITE_VERSION} failed:\n{}",
+            "pip install myosuite=={MYOSUITE_VERSION} mujoco=={MUJOCO_VERSION} failed:\n{}",
             stderr_tail(&out.stderr)
         )));
     }

@@ -206,9 +206,11 @@ fn intro(s: &mut String, args: &ReproduceArgs, model: &sim::model::Model) {
     );
     let _ = writeln!(
         s,
-        "A trained checkpoint plays the Gaussian policy PPO trained (`policy_std`: its action noise comes \
-         from the agent's seeded stream, so every number here is a function of the seed); the rows marked \
-         *mean action* play the same network without the noise, as rsl_rl's `act_inference` does.\n"
+        "A trained checkpoint plays the Gaussian policy PPO trained (`policy_std`), and the action noise \
+         its training environment added after the clip where the configuration had one (`action_noise`); \
+         that noise comes from the agent's seeded stream, so every number here is a function of the seed. \
+         The rows marked *mean action* play the same network without either, as rsl_rl's \
+         `act_inference` does.\n"
     );
 }
 

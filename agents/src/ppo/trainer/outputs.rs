@@ -161,6 +161,8 @@ impl Trainer {
                     .map(|&s| s as f64)
                     .collect(),
             ),
+            action_noise: (self.config.controller.action_noise > 0.0)
+                .then_some(self.config.controller.action_noise),
             grip_floor: (self.config.controller.grip_floor > 0.0)
                 .then_some(self.config.controller.grip_floor),
             training: Some(Training {
