@@ -33,8 +33,8 @@ pub enum PlayerSpec {
 
 impl PlayerSpec {
     /// The same player without the Gaussian noise a trained checkpoint was trained with
-    /// (`policy_std`, `action_noise`): it plays its network's mean action (named "… (mean action)"). A scripted
-    /// player is unchanged.
+    /// (`policy_std`, `action_noise`): it plays its network's mean action (named "… (mean
+    /// action)"). A scripted player is unchanged.
     pub fn mean_action(self) -> PlayerSpec {
         match self {
             PlayerSpec::Checkpoint(c) => {
