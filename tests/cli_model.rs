@@ -1,6 +1,7 @@
 //! `rally model inspect` and `rally model kinematics` through the built binary, on the shipped robot
 //! and on broken files (exit 2 with the file and line, nothing on stdout).
 
+use sha2::Digest;
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
@@ -42,6 +43,13 @@ fn inspect_lists_the_robot() {
             && text.contains("L4L5_flex")
             && text.contains("follows L5S1_flex")
     );
+    // The file's digest, as an independent hash of its bytes gives it.
+    let bytes = std::fs::read(robot()).unwrap();
+    let digest: String = sha2::Sha256::digest(&bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    assert!(text.contains(&format!("MJCF sha256 {digest}\n")), "{text}");
 }
 
 #[test]

@@ -214,3 +214,69 @@ fn a_ten_rally_match_plays_as_its_golden() {
         .collect();
     check("ten_rally_match", json!({"record": record, "replay": ends}));
 }
+
+/// MyoSuite's robot as `rally model import myosuite` wrote it (the file `RALLY_MYOCHALLENGE` names,
+/// as `.ci/run` sets it; otherwise the test says why it did not run): the file's SHA-256, and ten
+/// P2 serves each of the scripted agent and of the committed K-MAC checkpoint by its mean action,
+/// whose summaries (mean effort and activation sum every step) show a change in any bit of any
+/// step. The goldens above pin the default robot; this one pins the import (the pinned myosuite and
+/// MuJoCo must write the same file on every machine) and the simulator on the 273-muscle robot,
+/// from one machine to another.
+#[test]
+fn myosuite_robot_plays_as_its_golden() {
+    use sha2::Digest;
+    let Some(path) = std::env::var_os("RALLY_MYOCHALLENGE") else {
+        eprintln!(
+            "not run: set RALLY_MYOCHALLENGE to the file `rally model import myosuite` wrote"
+        );
+        return;
+    };
+    let bytes = std::fs::read(&path).unwrap();
+    let digest: String = sha2::Sha256::digest(&bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    let golden = goldens_dir().join("myochallenge_serves.json");
+    if std::env::var_os(UPDATE).is_none() {
+        if let Ok(text) = std::fs::read_to_string(&golden) {
+            let was: Value = serde_json::from_str(&text).expect("a golden is JSON");
+            let was = was["output"]["model_sha256"]
+                .as_str()
+                .unwrap_or("?")
+                .to_string();
+            assert_eq!(
+                digest, was,
+                "the imported model differs from the one the golden was made with (left: this \
+                 file's SHA-256): with the releases the import pins, the import is not reproducible \
+                 from one machine to another (an import through --python with another MuJoCo \
+                 differs too) — compare the two files"
+            );
+        }
+    }
+    let m = Arc::new(
+        sim::mjcf::load(std::path::Path::new(&path), &|p| std::fs::read_to_string(p))
+            .unwrap_or_else(|e| panic!("{e}")),
+    );
+    let e = agents::eval::Evaluation {
+        model: m.clone(),
+        config: sim::config::ArenaConfig::myochallenge(),
+        preset: MYOCHALLENGE,
+        kind: ServeKind::P2,
+        episodes: 10,
+        seed: 5,
+    };
+    let scripted = agents::factory::PlayerSpec::scripted("scripted").unwrap();
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/checkpoints/myochallenge/kmac.json"
+    ))
+    .unwrap();
+    let kmac = agents::checkpoint::Checkpoint::from_json(&text, &m).unwrap();
+    let kmac = agents::factory::PlayerSpec::Checkpoint(Arc::new(kmac)).mean_action();
+    let play = |spec| serde_json::to_value(agents::eval::evaluate(&e, spec, &|| {}).unwrap());
+    check(
+        "myochallenge_serves",
+        json!({"model_sha256": digest, "serve": "p2", "seed": 5,
+               "scripted": play(&scripted).unwrap(), "kmac_mean_action": play(&kmac).unwrap()}),
+    );
+}

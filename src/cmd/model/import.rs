@@ -277,6 +277,9 @@ pub fn run(args: &ImportArgs) -> Result<(), CliError> {
         model.actuators.len() - model.muscles().count(),
         model.tendons.len(),
     );
+    if let Some(digest) = super::file_sha256(&out) {
+        println!("sha256 {digest}");
+    }
     println!("use it with --model myochallenge (e.g. rally model inspect myochallenge)");
     Ok(())
 }

@@ -79,6 +79,25 @@ pub fn resolve_model(arg: &str) -> Result<(Model, PathBuf), CliError> {
     }
 }
 
+/// The SHA-256, in hex, of a MODEL argument's MJCF text (the built-in body's compiled-in text, the
+/// imported MyoChallenge robot's file, or the file named): what tells two imports, or two
+/// machines' files, apart. `None` when the file cannot be read.
+pub fn model_sha256(arg: &str) -> Option<String> {
+    let path = match arg {
+        "default" => return Some(server::db::sha256_hex(sim::config::DEFAULT_MODEL_XML)),
+        "myochallenge" => data_dir().join(import::MYOCHALLENGE_FILE),
+        file => PathBuf::from(file),
+    };
+    file_sha256(&path)
+}
+
+/// The SHA-256 of a file's text, in hex.
+pub fn file_sha256(path: &Path) -> Option<String> {
+    std::fs::read_to_string(path)
+        .ok()
+        .map(|text| server::db::sha256_hex(&text))
+}
+
 /// Loads a model from disk; a problem is a usage error naming the file and line.
 pub fn load_model(path: &Path) -> Result<Model, CliError> {
     sim::mjcf::load(path, &|p| std::fs::read_to_string(p))
@@ -88,15 +107,15 @@ pub fn load_model(path: &Path) -> Result<Model, CliError> {
 /// Runs `rally model`.
 pub fn run(args: &ModelArgs) -> Result<(), CliError> {
     match &args.command {
-        ModelCommand::Inspect { model, json } => {
-            let (m, model) = resolve_model(model)?;
+        ModelCommand::Inspect { model: arg, json } => {
+            let (m, model) = resolve_model(arg)?;
             if *json {
                 println!(
                     "{}",
                     serde_json::to_string_pretty(&inspect_json(&m)).map_err(anyhow::Error::from)?
                 );
             } else {
-                print!("{}", inspect_text(&m, &model));
+                print!("{}", inspect_text(&m, &model, model_sha256(arg)));
             }
             Ok(())
         }
@@ -292,7 +311,7 @@ fn spaces_text(m: &Model) -> String {
     s
 }
 
-fn inspect_text(m: &Model, path: &Path) -> String {
+fn inspect_text(m: &Model, path: &Path, sha256: Option<String>) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let independent: usize = (0..m.nv)
@@ -301,6 +320,9 @@ fn inspect_text(m: &Model, path: &Path) -> String {
     let nmuscles = m.muscles().count();
     let total_mass: f64 = m.bodies.iter().map(|b| b.mass).sum();
     let _ = writeln!(s, "{} ({})", m.name, path.display());
+    if let Some(digest) = sha256 {
+        let _ = writeln!(s, "  MJCF sha256 {digest}");
+    }
     let _ = writeln!(
         s,
         "  {} bodies ({total_mass:.2} kg), {} joints, nq {}, {} DoF ({independent} independent, {} coupled), {} actuators ({nmuscles} muscles), timestep {} s",

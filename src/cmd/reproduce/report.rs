@@ -159,9 +159,17 @@ fn intro(s: &mut String, args: &ReproduceArgs, model: &sim::model::Model) {
     if args.ablations {
         flag.push_str(" --ablations");
     }
+    // An imported robot is a file written at set-up: its digest says which one played.
+    let file = if default {
+        String::new()
+    } else {
+        super::super::model::model_sha256(&args.model.name)
+            .map(|d| format!("; model file sha256 `{d}`"))
+            .unwrap_or_default()
+    };
     let _ = writeln!(
         s,
-        "Written by `rally reproduce{flag} --episodes {} --seed {} --rallies {}` (simulator {}). Every agent plays the same {} \
+        "Written by `rally reproduce{flag} --episodes {} --seed {} --rallies {}` (simulator {}{file}). Every agent plays the same {} \
          MyoChallenge P2 serves in the single-serve environment: episode i uses the serve and agent seeds \
          `episode_seeds({}, i)`, i = 0…{}; training serves come from separate streams of each run's training \
          seed, so no evaluation serve was trained on. Rates are Wilson 95% intervals, means normal 95% intervals.\n",
