@@ -268,22 +268,31 @@ impl PaddleIk {
                 jac.fixed_view_mut::<3, 1>(3, c)
                     .copy_from(&(w_rot * proj * jw));
             }
-            let w = DMatrix::from_diagonal(&DVector::from_vec(mobility.clone()));
-            let jwjt = &jac * &w * jac.transpose() + DMatrix::identity(6, 6) * lambda2;
+            // W = diag(mobility). The products are written out: nalgebra hands matrix products
+            // over 5×5 to matrixmultiply, whose kernel (FMA or not) is picked from the CPU at run
+            // time, and an IK step must be the same bits on every machine.
+            let wjt = |y: &DVector<f64>| {
+                DVector::from_fn(n, |c, _| {
+                    mobility[c] * (0..6).map(|r| jac[(r, c)] * y[r]).sum::<f64>()
+                })
+            };
+            let jwjt = DMatrix::from_fn(6, 6, |r, k| {
+                let jwj: f64 = (0..n)
+                    .map(|c| jac[(r, c)] * mobility[c] * jac[(k, c)])
+                    .sum();
+                jwj + if r == k { lambda2 } else { 0.0 }
+            });
             let Some(ch) = jwjt.cholesky() else {
                 break;
             };
-            let mut step = &w * jac.transpose() * ch.solve(&e);
+            let mut step = wjt(&ch.solve(&e));
             if let Some(rest) = &self.rest {
                 // Null-space drift towards the rest posture: (I − W Jᵀ (J W Jᵀ)⁻¹ J) · W · (rest − q).
-                let pull = DVector::from_iterator(
-                    n,
-                    self.joints.iter().map(|&j| {
-                        REST_GAIN * (rest[model.joints[j].qpos_adr] - q[model.joints[j].qpos_adr])
-                    }),
-                );
-                let wp = &w * pull;
-                let projected = &wp - &w * jac.transpose() * ch.solve(&(&jac * &wp));
+                let wp = DVector::from_fn(n, |c, _| {
+                    let qa = model.joints[self.joints[c]].qpos_adr;
+                    mobility[c] * REST_GAIN * (rest[qa] - q[qa])
+                });
+                let projected = &wp - wjt(&ch.solve(&(&jac * &wp)));
                 step += projected;
             }
             let scale = (0.25 / step.amax().max(1e-12)).min(1.0);
@@ -302,7 +311,7 @@ impl PaddleIk {
         let (p, nrm) = self.blade();
         IkSolution {
             position_error: (target.pos - p).norm(),
-            normal_error: nrm.dot(&t_normal).abs().clamp(-1.0, 1.0).acos(),
+            normal_error: sim::math::acos(nrm.dot(&t_normal).abs().clamp(-1.0, 1.0)),
             qpos: q,
         }
     }

@@ -80,8 +80,8 @@ pub fn racket_command(v_in: &V3, v_out: &V3) -> (V3, V3) {
 
 /// Shortest rotation taking the paddle frame's +z to `u` (180° about x when `u` = −z).
 pub fn racket_orientation(u: &V3) -> UnitQuaternion<f64> {
-    UnitQuaternion::rotation_between(&V3::z(), u)
-        .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&V3::x_axis(), std::f64::consts::PI))
+    sim::math::quat_rotation_between(&V3::z(), u)
+        .unwrap_or_else(|| sim::math::quat_from_axis_angle(&V3::x_axis(), std::f64::consts::PI))
 }
 
 /// Plans the strike of the ball at `pos`, `vel`. The receiver defaults to the side the ball flies

@@ -102,7 +102,7 @@ impl Kinematics {
                         self.dof_anchor[joint.dof_adr] = anchor;
                         self.dof_rotates[joint.dof_adr] = true;
                         let angle = qpos[joint.qpos_adr] - joint.reference;
-                        quat *= UnitQuaternion::from_scaled_axis(joint.axis * angle);
+                        quat *= crate::math::quat_from_scaled_axis(joint.axis * angle);
                         pos = anchor - quat * joint.pos;
                     }
                     JointKind::Slide => {

@@ -29,6 +29,7 @@ pub mod episode;
 pub mod events;
 pub mod geometry;
 pub mod kinematics;
+pub mod math;
 pub mod mjcf;
 pub mod model;
 pub mod muscle;
@@ -49,5 +50,6 @@ pub use world::{BallWorld, Paddle};
 /// re-simulated. A change that alters any trajectory must bump it: `agents/tests/goldens.rs` fails
 /// when a served ball, a scripted episode or a 10-rally match changes while it stays the same
 /// (0.2.0: the first version its goldens pin; 0.1.0 covered several dynamics; 0.3.0: replay frames
-/// carry both robots' activations).
-pub const SIM_VERSION: &str = "0.3.0";
+/// carry both robots' activations; 0.4.0: elementary functions from [`math`] and IK products
+/// written out, so that every machine gives the same bits).
+pub const SIM_VERSION: &str = "0.4.0";

@@ -103,7 +103,7 @@ impl SideFrame {
     pub fn rotation_to_world(&self, q: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
         match self.side {
             Side::A => *q,
-            Side::B => UnitQuaternion::from_axis_angle(&V3::z_axis(), std::f64::consts::PI) * q,
+            Side::B => crate::math::quat_from_axis_angle(&V3::z_axis(), std::f64::consts::PI) * q,
         }
     }
 }
@@ -437,7 +437,7 @@ impl Robot {
         let mut v_com = p.lin_vel + p.ang_vel.cross(&(com - p.pose.pos));
         v_com += gravity * h;
         let com = com + v_com * h;
-        p.pose.rot = UnitQuaternion::from_scaled_axis(p.ang_vel * h) * p.pose.rot;
+        p.pose.rot = crate::math::quat_from_scaled_axis(p.ang_vel * h) * p.pose.rot;
         p.pose.pos = com - p.pose.rot * com_local;
         p.lin_vel = v_com + p.ang_vel.cross(&(p.pose.pos - com));
         let distance = (p.pose.pos - nominal.pose.pos).norm();

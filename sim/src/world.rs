@@ -6,7 +6,7 @@
 //! Reads the [`Preset`] and the paddles' motion; writes the ball, the clock and contact events.
 //! No I/O, no randomness.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 
 use crate::arena::{self, ImpulseCoeffs, Preset, Side, SoftContact, SurfaceLaw};
 use crate::ball::{self, BallState};
@@ -56,7 +56,7 @@ impl Paddle {
     pub fn pose_after(&self, tau: f64) -> Pose {
         Pose {
             pos: self.pose.pos + self.lin_vel * tau,
-            rot: UnitQuaternion::from_scaled_axis(self.ang_vel * tau) * self.pose.rot,
+            rot: crate::math::quat_from_scaled_axis(self.ang_vel * tau) * self.pose.rot,
         }
     }
 

@@ -71,7 +71,7 @@ fn segments_cross(a0: V2, a1: V2, b0: V2, b1: V2) -> bool {
 /// when the turn from `p0` to `p1` goes against the chosen solution's direction (`second`).
 fn arc_length(p0: V2, p1: V2, second: bool, radius: f64) -> f64 {
     let cos = unit2(p0).dot(&unit2(p1)).clamp(-1.0, 1.0);
-    let mut angle = cos.acos();
+    let mut angle = crate::math::acos(cos);
     let turn = p0.y * p1.x - p0.x * p1.y;
     if (turn > 0.0 && second) || (turn < 0.0 && !second) {
         angle = 2.0 * std::f64::consts::PI - angle;
@@ -217,13 +217,13 @@ pub fn wrap_inside(ends: [V2; 2], radius: f64) -> Option<V2> {
         ay = -ay;
     }
     let (p0, p1) = (V2::new(len0, 0.0), V2::new(e1.dot(&ax), e1.dot(&ay)));
-    let g = p1.y.atan2(p1.x);
+    let g = crate::math::atan2(p1.y, p1.x);
     let theta = if g < 1e-12 {
         0.5 * g
     } else {
         shortest_touch(p0, p1, g, radius)
     };
-    let (s, c) = theta.sin_cos();
+    let (s, c) = crate::math::sin_cos(theta);
     Some((ax * c + ay * s) * radius)
 }
 
@@ -233,7 +233,7 @@ pub fn wrap_inside(ends: [V2; 2], radius: f64) -> Option<V2> {
 fn shortest_touch(p0: V2, p1: V2, g: f64, r: f64) -> f64 {
     // First and second derivatives of the length in θ.
     let derivatives = |t: f64| -> (f64, f64) {
-        let (s, c) = t.sin_cos();
+        let (s, c) = crate::math::sin_cos(t);
         let (p, dp) = (V2::new(c, s) * r, V2::new(-s, c) * r);
         let (mut d1, mut d2) = (0.0, 0.0);
         for e in [p0, p1] {

@@ -23,12 +23,12 @@ impl Activation {
         match self {
             Activation::Linear => x,
             Activation::Relu => x.max(0.0),
-            Activation::Tanh => x.tanh(),
+            Activation::Tanh => sim::math::tanh(x),
             Activation::Elu => {
                 if x > 0.0 {
                     x
                 } else {
-                    x.exp_m1()
+                    sim::math::exp_m1(x)
                 }
             }
         }

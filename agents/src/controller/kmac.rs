@@ -55,7 +55,7 @@ pub fn muscle_pd_control(
 /// The official code's activation clamp, [σ(−7.5), σ(2.5)] ≈ [0.00055, 0.924]: its K-MAC sends the
 /// activation target itself as the control, within these bounds.
 pub fn official_activation_clamp() -> [f64; 2] {
-    let sigmoid = |x: f64| 1.0 / (1.0 + (-x).exp());
+    let sigmoid = |x: f64| 1.0 / (1.0 + sim::math::exp(-x));
     [sigmoid(-7.5), sigmoid(2.5)]
 }
 
@@ -68,7 +68,7 @@ pub fn clamped_normal_mean(mu: f64, sigma: f64, lo: f64, hi: f64) -> f64 {
         return mu.clamp(lo, hi);
     }
     let cdf = |x: f64| 0.5 * libm::erfc(-x * std::f64::consts::FRAC_1_SQRT_2);
-    let pdf = |x: f64| (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let pdf = |x: f64| sim::math::exp(-0.5 * x * x) / (2.0 * std::f64::consts::PI).sqrt();
     let (alpha, beta) = ((lo - mu) / sigma, (hi - mu) / sigma);
     let (below, above) = (cdf(alpha), cdf(-beta));
     let mean =

@@ -204,7 +204,7 @@ impl RallyEnv {
                     .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
             if plan.is_none() && !seat.stroke.in_progress() {
                 let d = (robot.paddle.pose.pos - seat.ready).norm();
-                terms.ready = (-4.0 * d).exp();
+                terms.ready = sim::math::exp(-4.0 * d);
             }
             // This side's return (exchange ≥ 1) crossing the other side's plane in the box.
             terms.dual = new_crossings

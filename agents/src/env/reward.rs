@@ -218,7 +218,7 @@ pub const MISS_GRACE: f64 = 0.05;
 
 /// Grasp term: 1 while the paddle is at its place in the hand, `exp(−20·d)` once it slips.
 pub fn grasp_term(robot: &Robot) -> f64 {
-    (-20.0 * robot.paddle_offset()).exp()
+    sim::math::exp(-20.0 * robot.paddle_offset())
 }
 
 /// The robot's mean muscle activation `‖a‖₁/n_a` (docs/design.md §7's mean activation, one step).
@@ -237,13 +237,13 @@ pub fn mean_activation(robot: &Robot) -> f64 {
 pub fn pose_terms(blade: &V3, normal: &V3, plan: &Plan) -> (f64, f64) {
     let u: V3 = plan.racket_quat * V3::z();
     let d = (blade - plan.strike_pos).norm();
-    let theta = normal.dot(&u).abs().min(1.0).acos();
-    ((-8.0 * d).exp(), (-2.0 * theta).exp())
+    let theta = sim::math::acos(normal.dot(&u).abs().min(1.0));
+    (sim::math::exp(-8.0 * d), sim::math::exp(-2.0 * theta))
 }
 
 /// Sparse velocity term at contact.
 pub fn velocity_term(paddle_vel: &V3, plan: &Plan) -> f64 {
-    (-(paddle_vel - plan.racket_vel).norm()).exp()
+    sim::math::exp(-(paddle_vel - plan.racket_vel).norm())
 }
 
 /// The task terms of a ball (robot frame) that this robot (side A of its frame) has just returned:
@@ -260,7 +260,7 @@ pub fn task_terms(ball: &BallState, bounce: &BounceModel, terms: &mut RewardTerm
         sim::predict::plane_crossing(&ball.pos, &ball.vel, Side::B.strike_plane_x(), bounce);
     if let Some(c) = &crossing {
         let (y_r, z) = Side::B.receiver_frame(&c.pos);
-        terms.centre = (-0.5 * (y_r * y_r + (z - SERVE_BOX_CENTRE_Z).powi(2)).sqrt()).exp();
+        terms.centre = sim::math::exp(-0.5 * (y_r * y_r + (z - SERVE_BOX_CENTRE_Z).powi(2)).sqrt());
     }
     if sim::predict::return_is_in_box(Side::A, &crossing) {
         terms.in_box = 1.0;
@@ -336,7 +336,7 @@ impl StrokeReward {
                 terms.velocity = velocity_term(&robot.paddle.lin_vel, plan);
                 if terms.hit == 1.0 {
                     let v = robot.frame.vector_from_world(&ball_world.vel);
-                    terms.ball_out = (-(v - plan.v_out).norm()).exp();
+                    terms.ball_out = sim::math::exp(-(v - plan.v_out).norm());
                 }
             }
         }

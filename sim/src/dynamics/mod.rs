@@ -530,7 +530,7 @@ fn integrate_positions(model: &Model, state: &mut State, h: f64) {
                     state.qpos[qa + 6],
                 ));
                 let w = V3::new(state.qvel[da + 3], state.qvel[da + 4], state.qvel[da + 5]);
-                let q = q * UnitQuaternion::from_scaled_axis(w * h);
+                let q = q * crate::math::quat_from_scaled_axis(w * h);
                 let c = q.quaternion();
                 state.qpos[qa + 3..qa + 7].copy_from_slice(&[c.w, c.i, c.j, c.k]);
             }

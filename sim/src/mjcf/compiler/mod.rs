@@ -37,8 +37,8 @@ fn quat_wxyz(q: [f64; 4]) -> UnitQuaternion<f64> {
 /// The minimal rotation taking local z onto `v` (MuJoCo's `zaxis` and `fromto`); a half turn about
 /// x when `v` points along −z.
 fn z_to(v: &V3) -> UnitQuaternion<f64> {
-    UnitQuaternion::rotation_between(&V3::z(), v)
-        .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&V3::x_axis(), std::f64::consts::PI))
+    crate::math::quat_rotation_between(&V3::z(), v)
+        .unwrap_or_else(|| crate::math::quat_from_axis_angle(&V3::x_axis(), std::f64::consts::PI))
 }
 
 /// The attributes of a `<body>` and of a `<frame>`: a name, a placement and a default class for
@@ -133,9 +133,9 @@ impl Compiler {
         }
         if let Some(e) = a.arr::<3>("euler")? {
             // MuJoCo's default eulerseq "xyz": intrinsic rotations about x, then y', then z''.
-            let rx = UnitQuaternion::from_axis_angle(&V3::x_axis(), self.angle(e[0]));
-            let ry = UnitQuaternion::from_axis_angle(&V3::y_axis(), self.angle(e[1]));
-            let rz = UnitQuaternion::from_axis_angle(&V3::z_axis(), self.angle(e[2]));
+            let rx = crate::math::quat_from_axis_angle(&V3::x_axis(), self.angle(e[0]));
+            let ry = crate::math::quat_from_axis_angle(&V3::y_axis(), self.angle(e[1]));
+            let rz = crate::math::quat_from_axis_angle(&V3::z_axis(), self.angle(e[2]));
             return Ok(rx * ry * rz);
         }
         if let Some(aa) = a.arr::<4>("axisangle")? {
@@ -147,7 +147,7 @@ impl Compiler {
                     .src
                     .err(format!("<{}> axisangle: zero axis", a.elem.name)));
             }
-            return Ok(UnitQuaternion::from_scaled_axis(
+            return Ok(crate::math::quat_from_scaled_axis(
                 axis / n * self.angle(aa[3]),
             ));
         }
