@@ -5,8 +5,9 @@
 //! Rust's `f64::sin`, `exp`, `acos`, … call the system's libm, which differs between platforms
 //! (glibc, macOS, musl) and, within glibc, between CPUs: glibc picks an FMA or an SSE2 build of
 //! each function when the program starts, and the two disagree in the last bit for some
-//! arguments. A match replayed on another machine drifted from there. These functions give the same
-//! bits on every machine; basic arithmetic and `sqrt` are IEEE-exact everywhere already.
+//! arguments: the goldens (`agents/tests/goldens/`) played on an emulated CPU without FMA diverged
+//! from there. These functions give the same bits on every machine; basic arithmetic and `sqrt` are
+//! IEEE-exact everywhere already.
 //! Quaternions built from an angle go through here too ([`quat_from_scaled_axis`]), since
 //! nalgebra's constructors call `f64::sin_cos`.
 //!
