@@ -339,7 +339,7 @@ pub fn rally_histogram(
             .fold(0.0f64, |a, &b| a.max(b))
             .max(0.05)
             * 1.1;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption("rally length (legal returns per rally)", ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(36)
