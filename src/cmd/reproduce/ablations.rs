@@ -120,8 +120,10 @@ pub(super) fn section(
     if files.is_empty() {
         let _ = writeln!(
             s,
-            "No ablation runs yet: `{}` holds no checkpoint. Train the variants with `[ablation]` in \
-             a `rally train --config` file (docs/training.md) and copy their checkpoints there.",
+            "No ablation runs yet: `{}` holds no checkpoint. `tools/train_ablations.sh` trains the \
+             variants and copies each checkpoint there (another robot: `MODEL=NAME CONFIG=FILE \
+             tools/train_ablations.sh`); or train a variant with `[ablation]` in a `rally train \
+             --config` file (docs/training.md) and copy its checkpoint there.",
             dir.display()
         );
         return Ok((s, None));

@@ -37,7 +37,9 @@ pub(super) fn rally_section(
          the heuristic rally serve). A rally's length is its legal returns (the serve is not one). A geometric \
          rally with per-stroke success p has mean p/(1−p): the column *implied p* inverts that. The drift slope is \
          the least-squares slope over exchange index of the energy distance between the serves' and the returns' \
-         crossings of the receiver's hitting plane (docs/design.md §7). The paper's record: 14 consecutive exchanges.\n",
+         crossings of the receiver's hitting plane (docs/design.md §7). A rally that reaches the arena's cap of \
+         legal returns (`[rally] cap`) or of seconds ends CAPPED, lost by no side: a longest marked *cap* ended so. The \
+         paper's record: 14 consecutive exchanges.\n",
         args.rallies, args.seed
     );
     let _ = writeln!(
@@ -54,13 +56,22 @@ pub(super) fn rally_section(
                 }
                 let ends: Vec<String> = ends.iter().map(|(k, n)| format!("{k} {n}")).collect();
                 let l = m.mean_rally_length;
+                let capped = m
+                    .rallies
+                    .iter()
+                    .any(|r| r.end == "CAPPED" && r.length == m.max_rally_length);
+                let longest = format!(
+                    "{}{}",
+                    m.max_rally_length,
+                    if capped { " (cap)" } else { "" }
+                );
                 let _ = writeln!(
                     s,
                     "| {} | {} | {:.2} | {} | {:.3} | {:.1}% | {} | {} |",
                     p.a,
                     p.b,
                     l,
-                    m.max_rally_length,
+                    longest,
                     l / (1.0 + l),
                     100.0 * m.drift.in_box_fraction,
                     m.drift
