@@ -42,7 +42,8 @@ pub struct TrainArgs {
     serve: Option<TrainServe>,
     /// Start from the weights, observation statistics and optimiser (its adaptive learning rate too)
     /// of the run in this directory (a warm start, e.g. --env rally --init runs/kmac); the counters
-    /// and the curve start fresh.
+    /// and the curve start fresh. What it reads is the run's resumable state (DIR/resume/), saved
+    /// every `checkpoint_every` iterations: a run that ended between two is taken from the last.
     #[arg(long, conflicts_with = "resume")]
     init: Option<PathBuf>,
     /// With --init: carry the start's optimiser (moments and learning rate, as rsl_rl loads one) or
@@ -270,10 +271,18 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
     bar.finish_and_clear();
     report(args, &trainer, &out.dir, started);
     if !at_boundary {
-        println!(
-            "(the resumable state is from iteration {}; --resume continues from there)",
-            trainer.progress.iteration - trainer.progress.iteration % every
-        );
+        let last = trainer.progress.iteration - trainer.progress.iteration % every;
+        if last == 0 {
+            println!(
+                "(no resumable state: the run ended before its first {every} iterations \
+                 (checkpoint_every); --resume would start it again, and --init cannot start from it)"
+            );
+        } else {
+            println!(
+                "(the resumable state is from iteration {last}; --resume continues from there, \
+                 and --init starts from it)"
+            );
+        }
     }
     Ok(())
 }
