@@ -67,7 +67,7 @@ fn draw_png(
         draw(&root)?;
         root.present().map_err(|e| e.to_string())?;
     }
-    write_png(out, size, &rgb).map_err(|e| format!("{}: {e}", out.display()))
+    write_png(out, size, &rgb)
 }
 
 /// Writes an RGB image losslessly at the PNG encoder's best compression, indexed when it has at
@@ -84,27 +84,36 @@ fn write_png(out: &Path, (w, h): (u32, u32), rgb: &[u8]) -> Result<(), String> {
             palette.len() - 1
         });
         if palette.len() > 256 {
-            indexed.clear();
             break;
         }
         indexed.push(i as u8);
     }
-    let file = std::fs::File::create(out).map_err(|e| e.to_string())?;
-    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w, h);
-    encoder.set_depth(png::BitDepth::Eight);
-    encoder.set_compression(png::Compression::Best);
-    encoder.set_adaptive_filter(png::AdaptiveFilterType::Adaptive);
-    let data = if palette.len() <= 256 {
-        encoder.set_color(png::ColorType::Indexed);
-        encoder.set_palette(palette.concat());
-        indexed
-    } else {
-        encoder.set_color(png::ColorType::Rgb);
-        rgb.to_vec()
-    };
-    let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
-    writer.write_image_data(&data).map_err(|e| e.to_string())?;
-    writer.finish().map_err(|e| e.to_string())
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, w, h);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_compression(png::Compression::Best);
+        encoder.set_adaptive_filter(png::AdaptiveFilterType::Adaptive);
+        let data: &[u8] = if palette.len() <= 256 {
+            encoder.set_color(png::ColorType::Indexed);
+            encoder.set_palette(palette.concat());
+            &indexed
+        } else {
+            encoder.set_color(png::ColorType::Rgb);
+            rgb
+        };
+        let mut writer = encoder
+            .write_header()
+            .map_err(|e| format!("{}: {e}", out.display()))?;
+        writer
+            .write_image_data(data)
+            .map_err(|e| format!("{}: {e}", out.display()))?;
+        writer
+            .finish()
+            .map_err(|e| format!("{}: {e}", out.display()))?;
+    }
+    // Whole or not at all: a figure is never left half-written.
+    agents::ppo::store::write_atomic(out, &bytes)
 }
 
 /// The palette, one colour per run.

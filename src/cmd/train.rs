@@ -275,7 +275,7 @@ pub fn run(args: &TrainArgs) -> Result<(), CliError> {
         if last == 0 {
             println!(
                 "(no resumable state: the run ended before its first {every} iterations \
-                 (checkpoint_every); --resume would start it again, and --init cannot start from it)"
+                 (checkpoint_every); run it again without --resume to start over; --init cannot start from it)"
             );
         } else {
             println!(

@@ -87,6 +87,11 @@ impl Group {
     }
 }
 
+/// Env steps in millions, as Table I prints them.
+fn millions(steps: u64) -> String {
+    format!("{:.2} M", steps as f64 / 1e6)
+}
+
 /// Mean and sample standard deviation (0 for one value).
 fn mean_sd(x: &[f64]) -> (f64, f64) {
     let n = x.len().max(1) as f64;
@@ -255,8 +260,8 @@ pub(super) fn section(
             .filter_map(|m| m.checkpoint.training.as_ref().map(|t| t.env_steps))
             .collect();
         let steps = match (steps.iter().min(), steps.iter().max()) {
-            (Some(a), Some(b)) if a == b => format!("{a}"),
-            (Some(a), Some(b)) => format!("{a}–{b}"),
+            (Some(a), Some(b)) if a == b => millions(*a),
+            (Some(a), Some(b)) => format!("{}–{}", millions(*a), millions(*b)),
             _ => "—".into(),
         };
         let paper = VARIANTS

@@ -38,7 +38,8 @@ pub(super) fn rally_section(
          rally with per-stroke success p has mean p/(1−p): the column *implied p* inverts that. The drift slope is \
          the least-squares slope over exchange index of the energy distance between the serves' and the returns' \
          crossings of the receiver's hitting plane (docs/design.md §7). A rally that reaches the arena's cap of \
-         legal returns (`[rally] cap`) or of seconds ends CAPPED, lost by no side: a longest marked *cap* ended so. The \
+         legal returns (`[rally] cap`) or its time limit (`[rally] max_seconds`) ends CAPPED, lost by no side: a \
+         longest marked *cap* ended so, and where rallies were capped the mean and implied p are lower bounds. The \
          paper's record: 14 consecutive exchanges.\n",
         args.rallies, args.seed
     );
@@ -56,10 +57,9 @@ pub(super) fn rally_section(
                 }
                 let ends: Vec<String> = ends.iter().map(|(k, n)| format!("{k} {n}")).collect();
                 let l = m.mean_rally_length;
-                let capped = m
-                    .rallies
-                    .iter()
-                    .any(|r| r.end == "CAPPED" && r.length == m.max_rally_length);
+                let capped = m.rallies.iter().any(|r| {
+                    r.end == sim::rules::EndReason::Capped.name() && r.length == m.max_rally_length
+                });
                 let longest = format!(
                     "{}{}",
                     m.max_rally_length,
