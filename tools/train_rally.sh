@@ -17,6 +17,7 @@
 # Usage: [MODEL=myochallenge CONFIG=config/train-myochallenge.toml]
 #        [RS_STEPS=1.68e6] [STROKE_STEPS=4e6] [BANK_STEPS=2.5e6] [ROUNDS=2] [NOISE=0.5]
 #        [STROKE_VALIDATE_EVERY=50] [VALIDATE_EVERY=100] [BANK_RALLIES=1000]
+#        [LR=1e-4: every stage's learning_rate instead of CONFIG's]
 #        tools/train_rally.sh BASE_RUN [RUNS_DIR] [OUT]
 # e.g.   tools/train_rally.sh runs/kmac runs/rally runs/rally/kmac-rally.json
 set -euo pipefail
@@ -39,16 +40,18 @@ if [ ! -d "$base/resume" ] && [ ! -d "$base/resume.old" ]; then
 fi
 mkdir -p "$runs"
 
-# CONFIG without the tables this script sets, with serve = "stroke" and the ball_out reward.
-stroke_config() {
+# CONFIG without the tables this script sets, with LR as its learning rate when given, and for the
+# stroke and bank stages (argument "stroke") serve = "stroke" and the ball_out reward.
+stage_config() {
   awk '
     /^\[/ { skip = ($0 ~ /^\[(validation|bank)\]/) }
     skip { next }
-    /^serve[ \t]*=/ { print "serve = \"stroke\""; next }
-    /^ball_out[ \t]*=/ { next }
+    /^learning_rate[ \t]*=/ && lr != "" { print "learning_rate = " lr; next }
+    stroke && /^serve[ \t]*=/ { print "serve = \"stroke\""; next }
+    stroke && /^ball_out[ \t]*=/ { next }
     { print }
-    /^\[reward\]/ { print "ball_out = 100.0" }
-  ' "$config"
+    stroke && /^\[reward\]/ { print "ball_out = 100.0" }
+  ' lr="${LR:-}" stroke="$([ "${1:-}" = stroke ] && echo 1 || echo 0)" "$config"
 }
 
 # One training stage: name, init directory, steps, seed, config, extra arguments.
@@ -62,11 +65,13 @@ train() {
 }
 
 # 1. rally serves
-train "$runs/rs" "$base" "${RS_STEPS:-1.68e6}" 3 "$config" --serve rally
+cfg="$runs/rs.toml"
+stage_config >"$cfg"
+train "$runs/rs" "$base" "${RS_STEPS:-1.68e6}" 3 "$cfg" --serve rally
 
 # 2. stroke serves, validated on single serves
 cfg="$runs/stroke.toml"
-{ stroke_config; printf "\n[validation]\nevery = %s\nepisodes = 200\nseed = 4242\nenv = \"single\"\n" "${STROKE_VALIDATE_EVERY:-50}"; } >"$cfg"
+{ stage_config stroke; printf "\n[validation]\nevery = %s\nepisodes = 200\nseed = 4242\nenv = \"single\"\n" "${STROKE_VALIDATE_EVERY:-50}"; } >"$cfg"
 train "$runs/stroke" "$runs/rs" "${STROKE_STEPS:-4e6}" 31 "$cfg"
 prev="$runs/stroke"
 
@@ -81,7 +86,7 @@ for k in $(seq 1 "$rounds"); do
     mv "$dir/returns.json.part" "$dir/returns.json"
   fi
   cfg="$dir/train.toml"
-  { stroke_config
+  { stage_config stroke
     printf '\n[bank]\nfile = "%s"\nfraction = 0.5\n' "$dir/returns.json"
     printf '\n[validation]\nevery = %s\nepisodes = 200\nseed = 4242\nenv = "rally"\n' "${VALIDATE_EVERY:-100}"
   } >"$cfg"
