@@ -569,3 +569,32 @@ fn the_bound_loss_pulls_pinned_means_back_towards_the_bound() {
     cfg.ppo.bound_coef = -1.0;
     assert_eq!(cfg.validate().unwrap_err(), "ppo.bound_coef: out of range");
 }
+
+#[test]
+fn the_task_rules_setting_reaches_both_training_environments() {
+    use agents::ppo::trainer::envs::{make_env, TrainingEnv};
+    let m = model();
+    let arena = sim::config::ArenaConfig::default();
+    assert_eq!(
+        TrainConfig::default().task_rules,
+        agents::env::TaskRules::Ours
+    );
+    for env in ["single", "rally"] {
+        let text = format!("env = \"{env}\"\ntask_rules = \"official\"\n");
+        let c: TrainConfig = toml::from_str(&text).expect("parses");
+        let controller = c.controller(Method::Kmac, &m);
+        let rules = match make_env(&m, &arena, &controller, &c, None)
+            .expect("builds")
+            .0
+        {
+            TrainingEnv::Single(e) => e.task_rules,
+            TrainingEnv::Rally(e) => e.task_rules,
+        };
+        assert_eq!(rules, agents::env::TaskRules::Official, "{env}");
+    }
+    let bad = toml::from_str::<TrainConfig>("task_rules = \"strict\"").unwrap_err();
+    assert!(
+        bad.to_string().contains("ours") && bad.to_string().contains("official"),
+        "{bad}"
+    );
+}

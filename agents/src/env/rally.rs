@@ -44,6 +44,8 @@ pub struct RallyEnv {
     pub mapper: crate::controller::ActionMapper,
     /// Reward weights.
     pub weights: RewardWeights,
+    /// The rules the task terms judge a return by (training: `task_rules`).
+    pub task_rules: TaskRules,
     /// Least control of the grip muscles (see [`apply_grip_floor`]).
     pub grip_floor: f64,
     seats: [Seat; 2],
@@ -91,6 +93,7 @@ impl RallyEnv {
             ctrl: vec![0.0; model.actuators.len()],
             rally,
             weights,
+            task_rules: TaskRules::Ours,
             grip_floor: 0.0,
             seats: [seat(Side::A), seat(Side::B)],
             bounce,
@@ -199,9 +202,14 @@ impl RallyEnv {
             seat.hit |= contact;
             let plan = seat.observer.command().map(|(p, _)| *p);
             let tracking = plan.is_some() && seat.stroke.since_contact.is_none() && !contact;
-            let (mut terms, _) =
-                seat.stroke
-                    .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
+            let (mut terms, _) = seat.stroke.step(
+                robot,
+                &ball,
+                contact,
+                plan.as_ref(),
+                &self.bounce,
+                self.task_rules,
+            );
             if plan.is_none() && !seat.stroke.in_progress() {
                 let d = (robot.paddle.pose.pos - seat.ready).norm();
                 terms.ready = sim::math::exp(-4.0 * d);

@@ -208,6 +208,30 @@ impl Ablation {
     }
 }
 
+/// How the task terms judge a return (`task_rules` of a training configuration). Both judge the
+/// same prediction of the ball's flight (drag-free, then the table's bounce law); they differ in the
+/// thresholds. Evaluation and the training curves' predicted success always use ours.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TaskRules {
+    /// Ours, the rules' own: `landing` when the next bounce is on the other half and the ball
+    /// clears the net on the way; `fault` for every other return.
+    #[default]
+    Ours,
+    /// The official code's (docs/design.md §11): `landing` when the next bounce lies inside the
+    /// other half shrunk by [`OFFICIAL_LANDING_MARGIN`] and the ball crosses the net's plane at least
+    /// [`OFFICIAL_NET_CLEARANCE_Z`] high and over the table's width; `fault` only for a return that
+    /// crosses that plane lower (the net) or beside the table (wide), so a long ball earns neither.
+    Official,
+}
+
+/// The official task rules' margins inside the other half, m: from its end line, from the net, from
+/// either side line (`x ∈ (−1.34, −0.05)`, `y ∈ (−0.68, 0.76)` on this table).
+pub const OFFICIAL_LANDING_MARGIN: (f64, f64, f64) = (0.03, 0.05, 0.04);
+/// The height the official task rules ask of a return at the net's plane, m (its net's top, 0.95,
+/// plus 0.05; ours is 0.9475).
+pub const OFFICIAL_NET_CLEARANCE_Z: f64 = 1.00;
+
 /// The serve box's centre height, m (official code: the `(0, 1.225)` the `centre` term aims at).
 pub const SERVE_BOX_CENTRE_Z: f64 = 0.5 * (arena::SERVE_BOX_Z.0 + arena::SERVE_BOX_Z.1);
 /// Control steps after the ball leaves the paddle at which the task terms are judged and a training
@@ -249,10 +273,23 @@ pub fn velocity_term(paddle_vel: &V3, plan: &Plan) -> f64 {
 /// The task terms of a ball (robot frame) that this robot (side A of its frame) has just returned:
 /// predicted landing on the other half, closeness of the crossing of the other plane to the serve
 /// box's centre, that crossing in the box, or a predicted fault.
-pub fn task_terms(ball: &BallState, bounce: &BounceModel, terms: &mut RewardTerms) {
-    let lands = predicted_legal(ball, bounce);
-    if !lands {
+pub fn task_terms(
+    ball: &BallState,
+    bounce: &BounceModel,
+    rules: TaskRules,
+    terms: &mut RewardTerms,
+) {
+    let (lands, fault) = match rules {
+        TaskRules::Ours => {
+            let legal = predicted_legal(ball, bounce);
+            (legal, !legal)
+        }
+        TaskRules::Official => official_judgement(ball, bounce),
+    };
+    if fault {
         terms.fault = 1.0;
+    }
+    if !lands {
         return;
     }
     terms.landing = 1.0;
@@ -274,6 +311,28 @@ pub fn predicted_legal(ball: &BallState, bounce: &BounceModel) -> bool {
         && sim::predict::clears_net(&ball.pos, &ball.vel)
 }
 
+/// The official task rules' judgement of a return (robot frame): `(lands, fault)`, see
+/// [`TaskRules::Official`]. A ball that never reaches the net's plane is a fault.
+pub fn official_judgement(ball: &BallState, bounce: &BounceModel) -> (bool, bool) {
+    if ball.vel.x >= -1e-12 || ball.pos.x <= 0.0 {
+        return (false, true);
+    }
+    let t = -ball.pos.x / ball.vel.x;
+    let (p, _) = sim::predict::flight(&ball.pos, &ball.vel, t);
+    let fault =
+        p.z < OFFICIAL_NET_CLEARANCE_Z || p.y < arena::TABLE_Y_MIN || p.y > arena::TABLE_Y_MAX;
+    let (end, net, side) = OFFICIAL_LANDING_MARGIN;
+    let inside = |b: &V3| {
+        b.x > -(arena::TABLE_HALF_LENGTH - end)
+            && b.x < -net
+            && b.y > arena::TABLE_Y_MIN + side
+            && b.y < arena::TABLE_Y_MAX - side
+    };
+    let lands = !fault
+        && sim::predict::next_bounce(&ball.pos, &ball.vel, bounce).is_some_and(|b| inside(&b.pos));
+    (lands, fault)
+}
+
 /// Blade centre and normal of a robot's paddle (robot frame).
 pub fn blade(robot: &Robot) -> (V3, V3) {
     let p = &robot.paddle.pose;
@@ -290,6 +349,9 @@ pub(crate) struct StrokeReward {
     pub(crate) since_contact: Option<usize>,
     /// The task terms were paid for this ball.
     pub(crate) judged: bool,
+    /// Once judged: whether the return was predicted to land by our rules (whatever rules the reward
+    /// judged it by), the training curves' predicted success.
+    pub(crate) legal: bool,
 }
 
 impl StrokeReward {
@@ -309,6 +371,7 @@ impl StrokeReward {
         contact: bool,
         plan: Option<&Plan>,
         bounce: &BounceModel,
+        rules: TaskRules,
     ) -> (RewardTerms, bool) {
         let mut terms = RewardTerms {
             grasp: grasp_term(robot),
@@ -350,7 +413,11 @@ impl StrokeReward {
                 vel: f.vector_from_world(&ball_world.vel),
                 spin: ball_world.spin,
             };
-            task_terms(&local, bounce, &mut terms);
+            task_terms(&local, bounce, rules, &mut terms);
+            self.legal = match rules {
+                TaskRules::Ours => terms.landing > 0.0,
+                TaskRules::Official => predicted_legal(&local, bounce),
+            };
         }
         (terms, paid)
     }
@@ -389,6 +456,100 @@ mod tests {
         }
         let sum = parts.iter().fold(0.0, |s, x| s + x);
         assert_eq!(sum.to_bits(), terms.total(&w).to_bits());
+    }
+
+    /// A return from (0.6, y, z) on side A's half towards the other with velocity `v`.
+    fn ret(y: f64, z: f64, v: [f64; 3]) -> BallState {
+        BallState {
+            pos: V3::new(0.6, arena::TABLE_CENTER_Y + y, z),
+            vel: V3::new(v[0], v[1], v[2]),
+            spin: V3::zeros(),
+        }
+    }
+
+    /// Where the return crosses the net's plane, and where it next bounces (if on the table).
+    fn premises(b: &BallState, bounce: &BounceModel) -> (V3, Option<V3>) {
+        let (p, _) = sim::predict::flight(&b.pos, &b.vel, -b.pos.x / b.vel.x);
+        let land = sim::predict::next_bounce(&b.pos, &b.vel, bounce).map(|x| x.pos);
+        (p, land)
+    }
+
+    fn judged(b: &BallState, bounce: &BounceModel, rules: TaskRules) -> RewardTerms {
+        let mut t = RewardTerms::default();
+        task_terms(b, bounce, rules, &mut t);
+        t
+    }
+
+    #[test]
+    fn the_official_rules_ask_for_margins_and_height_and_fault_only_the_net_and_wide() {
+        let bounce = BounceModel::for_table(&arena::MYOCHALLENGE.table);
+        let (end, _, side) = OFFICIAL_LANDING_MARGIN;
+        // Mid-half and high over the net: both rules call it landed.
+        let b = ret(0.0, 1.1, [-5.0, 0.0, 1.0]);
+        let (at_net, land) = premises(&b, &bounce);
+        let land = land.expect("bounces");
+        assert!(at_net.z > OFFICIAL_NET_CLEARANCE_Z + 0.1);
+        assert!(
+            land.x < -0.5 && land.x > -(arena::TABLE_HALF_LENGTH - end),
+            "{land}"
+        );
+        for rules in [TaskRules::Ours, TaskRules::Official] {
+            let t = judged(&b, &bounce, rules);
+            assert_eq!((t.landing, t.fault), (1.0, 0.0), "{rules:?}");
+            assert!(t.centre > 0.0);
+        }
+        // Bouncing within the end margin: ours lands, the official rules pay neither.
+        let b = ret(0.0, 1.1, [-5.3, 0.0, 1.0]);
+        let land = premises(&b, &bounce).1.expect("bounces");
+        let margin = -(arena::TABLE_HALF_LENGTH - end);
+        assert!(
+            land.x < margin && land.x > -arena::TABLE_HALF_LENGTH,
+            "{land}"
+        );
+        let t = judged(&b, &bounce, TaskRules::Ours);
+        assert_eq!((t.landing, t.fault), (1.0, 0.0));
+        let t = judged(&b, &bounce, TaskRules::Official);
+        assert_eq!(
+            (t.landing, t.fault, t.centre, t.in_box),
+            (0.0, 0.0, 0.0, 0.0)
+        );
+        // Long, high over the net: a fault of ours, nothing by the official rules.
+        let b = ret(0.0, 1.1, [-6.0, 0.0, 1.0]);
+        let (at_net, land) = premises(&b, &bounce);
+        assert!(land.is_none() && at_net.z > OFFICIAL_NET_CLEARANCE_Z);
+        assert_eq!(judged(&b, &bounce, TaskRules::Ours).fault, 1.0);
+        let t = judged(&b, &bounce, TaskRules::Official);
+        assert_eq!((t.landing, t.fault), (0.0, 0.0));
+        // Over our net but under 1.00 m at its plane, landing mid-half: a fault of the official rules.
+        let b = ret(0.0, 0.99, [-6.0, 0.0, 0.3]);
+        let (at_net, land) = premises(&b, &bounce);
+        let land = land.expect("bounces");
+        assert!(sim::predict::clears_net(&b.pos, &b.vel) && at_net.z < OFFICIAL_NET_CLEARANCE_Z);
+        assert!(land.x < -0.5 && land.x > -1.2, "{land}");
+        assert_eq!(judged(&b, &bounce, TaskRules::Ours).landing, 1.0);
+        let t = judged(&b, &bounce, TaskRules::Official);
+        assert_eq!((t.landing, t.fault), (0.0, 1.0));
+        // Beside the table at the net's plane: a fault of both.
+        let b = ret(0.0, 1.1, [-5.0, 7.0, 1.0]);
+        assert!(premises(&b, &bounce).0.y > arena::TABLE_Y_MAX);
+        for rules in [TaskRules::Ours, TaskRules::Official] {
+            let t = judged(&b, &bounce, rules);
+            assert_eq!((t.landing, t.fault), (0.0, 1.0), "{rules:?}");
+        }
+        // Within a side margin (the other side of the table in side B's frame is the same margin).
+        let b = ret(0.0, 1.1, [-5.0, 2.0, 1.0]);
+        let land = premises(&b, &bounce).1.expect("bounces");
+        assert!(
+            land.y > arena::TABLE_Y_MAX - side && land.y < arena::TABLE_Y_MAX,
+            "{land}"
+        );
+        assert_eq!(judged(&b, &bounce, TaskRules::Ours).landing, 1.0);
+        assert_eq!(judged(&b, &bounce, TaskRules::Official).landing, 0.0);
+        // A ball that does not go towards the net is a fault of both.
+        let b = ret(0.0, 1.1, [1.0, 0.0, 1.0]);
+        for rules in [TaskRules::Ours, TaskRules::Official] {
+            assert_eq!(judged(&b, &bounce, rules).fault, 1.0, "{rules:?}");
+        }
     }
 
     #[test]

@@ -69,6 +69,8 @@ pub struct Env {
     pub mapper: crate::controller::ActionMapper,
     /// Reward weights.
     pub weights: RewardWeights,
+    /// The rules the task terms judge a return by (training: `task_rules`).
+    pub task_rules: TaskRules,
     /// Serve distribution.
     pub kind: sim::serve::ServeKind,
     /// When an episode ends.
@@ -107,6 +109,7 @@ impl Env {
             ctrl: vec![0.0; model.actuators.len()],
             episode,
             weights,
+            task_rules: TaskRules::Ours,
             kind,
             end: EpisodeEnd::Rules,
             grip_floor: 0.0,
@@ -220,11 +223,16 @@ impl Env {
         let contact = paddle_contact(&report, Side::A);
         let plan = self.observer.command().map(|(p, _)| *p);
         let strike_time = self.observer.command().map(|(_, t_hit)| *t_hit);
-        let (terms, judged) = self
-            .stroke
-            .step(robot, &ball, contact, plan.as_ref(), &self.bounce);
+        let (terms, judged) = self.stroke.step(
+            robot,
+            &ball,
+            contact,
+            plan.as_ref(),
+            &self.bounce,
+            self.task_rules,
+        );
         if judged {
-            self.predicted_success = terms.landing > 0.0;
+            self.predicted_success = self.stroke.legal;
         }
         let mut done = report.done;
         if self.end == EpisodeEnd::Training {

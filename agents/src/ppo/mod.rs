@@ -386,6 +386,9 @@ pub struct TrainConfig {
     /// The paper's ablations (what of the command is observed and rewarded, the task reward);
     /// the default removes nothing.
     pub ablation: crate::env::Ablation,
+    /// The rules the task terms judge a return by: ours (the default) or the official code's
+    /// margins (see [`crate::env::TaskRules`]).
+    pub task_rules: crate::env::TaskRules,
 }
 
 /// A ball bank for the single-serve environment (ours; see [`crate::env::BallBank`]): the file

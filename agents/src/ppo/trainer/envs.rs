@@ -149,6 +149,7 @@ pub fn make_env(
             )?;
             env.end = EpisodeEnd::Training;
             env.grip_floor = grip_floor;
+            env.task_rules = config.task_rules;
             env.noise = crate::env::TrainingNoise {
                 action: config.controller.action_noise,
                 activation: config.controller.activation_noise,
@@ -167,6 +168,7 @@ pub fn make_env(
                 config.reward_weights(),
             )?;
             env.grip_floor = grip_floor;
+            env.task_rules = config.task_rules;
             let (o, a) = (env.obs_dim(), env.action_dim());
             (TrainingEnv::Rally(Box::new(env)), o, a)
         }
