@@ -470,16 +470,25 @@ fn train(
 fn report(args: &TrainArgs, trainer: &Trainer, dir: &RunDir, started: std::time::Instant) {
     let last = trainer.progress.curve.last().copied().unwrap_or_default();
     let t = trainer.timing;
+    let session = if t.env_steps == 0 {
+        // A resumed run that had already reached --steps.
+        "nothing left to train this session: the run had reached --steps".to_string()
+    } else {
+        let all = (t.simulation + t.policy + t.update).max(1e-9);
+        format!(
+            "{:.0} steps/s this session: simulation {:.0}%, policy {:.0}%, update {:.0}%",
+            t.env_steps as f64 / started.elapsed().as_secs_f64(),
+            100.0 * t.simulation / all,
+            100.0 * t.policy / all,
+            100.0 * t.update / all,
+        )
+    };
     println!(
-        "{}: {} steps in {} iterations, {:.0} s of training ({:.0} steps/s this session: simulation {:.0}%, policy {:.0}%, update {:.0}%)",
+        "{}: {} steps in {} iterations, {:.0} s of training ({session})",
         args.method.paper_name(),
         last.env_steps,
         last.iteration,
         last.wall_s,
-        t.env_steps as f64 / started.elapsed().as_secs_f64(),
-        100.0 * t.simulation / (t.simulation + t.policy + t.update).max(1e-9),
-        100.0 * t.policy / (t.simulation + t.policy + t.update).max(1e-9),
-        100.0 * t.update / (t.simulation + t.policy + t.update).max(1e-9),
     );
     println!(
         "last {} training episodes: reward {:.1}, hit {:.1}%, success {:.1}% (predicted landing)",
