@@ -34,13 +34,15 @@ pub enum PlayerSpec {
 impl PlayerSpec {
     /// The same player without the Gaussian noise a trained checkpoint was trained with
     /// (`policy_std`, `action_noise`): it plays its network's mean action (named "… (mean
-    /// action)"). A scripted player is unchanged.
+    /// action)"), and K-MAC the expectation of its training noise on the activations, so that
+    /// nothing is drawn. A scripted player is unchanged.
     pub fn mean_action(self) -> PlayerSpec {
         match self {
             PlayerSpec::Checkpoint(c) => {
                 let mut c = (*c).clone();
                 c.policy_std = None;
                 c.action_noise = None;
+                c.expected_activation_noise = true;
                 c.name = format!("{} (mean action)", c.name);
                 PlayerSpec::Checkpoint(std::sync::Arc::new(c))
             }

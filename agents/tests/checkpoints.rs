@@ -107,6 +107,63 @@ fn a_checkpoint_plays_the_action_noise_it_was_trained_with_and_mean_action_drops
     assert_eq!(controls_of(&m, &n.clone().mean_action(), 3), quiet);
 }
 
+#[test]
+fn a_kmac_checkpoint_draws_its_activation_noise_in_play_and_its_mean_action_plays_the_expectation() {
+    // K-MAC trained with σ 0.1 on its activation targets (the official form, clamped): the player
+    // draws that noise as training did, seeded; the mean action draws nothing and plays each
+    // control's expectation under the clamp, E[clip(u + σZ)], from the noiseless control u.
+    let m = model();
+    let [lo, hi] = agents::controller::official_activation_clamp();
+    let spec = |noise: Option<f64>| {
+        let c = ControllerSpec::Kmac {
+            gains: PdGains { kp: 10.0, kd: 1.0 },
+            activation_clamp: Some([lo, hi]),
+            activation_noise: noise,
+        };
+        let ck = Checkpoint::template(&m, "t", c, &[8], Activation::Tanh);
+        let text = serde_json::to_string(&ck).unwrap();
+        PlayerSpec::Checkpoint(Arc::new(Checkpoint::from_json(&text, &m).unwrap()))
+    };
+    let (plain, noisy) = (spec(None), spec(Some(0.1)));
+    let quiet = controls_of(&m, &plain, 3);
+    let drawn = controls_of(&m, &noisy, 3);
+    assert_eq!(drawn, controls_of(&m, &noisy, 3), "deterministic per seed");
+    assert_ne!(drawn, controls_of(&m, &noisy, 4));
+    let mean = controls_of(&m, &noisy.clone().mean_action(), 3);
+    assert_eq!(mean, controls_of(&m, &noisy.mean_action(), 3));
+    // The first step starts from the same state in all three: compare muscle by muscle.
+    let muscles: Vec<usize> = m.muscles().map(|(i, _)| i).collect();
+    let mut moved = 0;
+    for &a in &muscles {
+        let u = quiet[0][a];
+        let expected = agents::controller::clamped_normal_mean(u, 0.1, lo, hi);
+        if u > lo && u < hi {
+            assert!(
+                (mean[0][a] - expected).abs() < 1e-12,
+                "muscle {a}: mean action {} against E = {expected} (noiseless {u})",
+                mean[0][a]
+            );
+        } else {
+            // Clamped: the control before the clamp lay beyond the bound, so the expectation is
+            // between the bound and the one from the bound itself.
+            let (m, at) = (mean[0][a], expected);
+            assert!(
+                (u == lo && m > lo && m <= at + 1e-12) || (u == hi && m < hi && m >= at - 1e-12),
+                "muscle {a}: mean action {m}, bound {u}, E from the bound {at}"
+            );
+        }
+        assert!((lo..=hi).contains(&drawn[0][a]), "muscle {a}: {}", drawn[0][a]);
+        if (drawn[0][a] - u).abs() > 1e-6 && (drawn[0][a] - expected).abs() > 1e-6 {
+            moved += 1;
+        }
+    }
+    assert!(
+        moved > muscles.len() / 4,
+        "only {moved} of {} muscles drew noise",
+        muscles.len()
+    );
+}
+
 fn refused(m: &Model, ck: &Checkpoint, field: &str) {
     let text = serde_json::to_string(ck).unwrap();
     let e = Checkpoint::from_json(&text, m).expect_err("must be refused");

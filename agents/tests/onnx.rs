@@ -34,6 +34,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
         action_noise: None,
         grip_floor: None,
         training: None,
+        expected_activation_noise: false,
     }
 }
 

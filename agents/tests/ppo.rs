@@ -90,7 +90,7 @@ fn the_myochallenge_configuration_is_the_default_but_for_kmac_noise_schedule_and
         (c.controller.action_noise, c.controller.activation_noise),
         (0.05, 0.1)
     );
-    // Its K-MAC checkpoints record the activation noise (they play its expectation); the other
+    // Its K-MAC checkpoints record the activation noise (they draw it in play); the other
     // methods have no activation of their own and record none.
     let m = model();
     let spec = |c: &TrainConfig, method| c.controller(method, &m);

@@ -295,8 +295,8 @@ impl VecEnv {
 }
 
 /// A checkpoint (its JSON text) around an ONNX network trained elsewhere, as `rally checkpoint
-/// from-onnx` writes it: `method`'s controller (gains, K-MAC's clamp, its activation noise, played
-/// as its expectation, and the grip floor from `config`, a `rally train` configuration file, or
+/// from-onnx` writes it: `method`'s controller (gains, K-MAC's clamp, its activation noise, drawn
+/// in play as in training, and the grip floor from `config`, a `rally train` configuration file, or
 /// its defaults), `obs_mean` and `obs_std` applied
 /// before the network (both or neither), validated against the robot `model` first.
 #[pyfunction]

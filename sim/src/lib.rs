@@ -51,5 +51,7 @@ pub use world::{BallWorld, Paddle};
 /// when a served ball, a scripted episode or a 10-rally match changes while it stays the same
 /// (0.2.0: the first version its goldens pin; 0.1.0 covered several dynamics; 0.3.0: replay frames
 /// carry both robots' activations; 0.4.0: elementary functions from [`math`] and IK products
-/// written out, so that every machine gives the same bits).
-pub const SIM_VERSION: &str = "0.4.0";
+/// written out, so that every machine gives the same bits; 0.5.0: a K-MAC checkpoint trained with
+/// noise on its activations draws that noise in play, as training did, instead of playing its
+/// expectation).
+pub const SIM_VERSION: &str = "0.5.0";

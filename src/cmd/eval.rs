@@ -35,7 +35,8 @@ pub struct EvalArgs {
     #[arg(long, default_value = "myochallenge", value_parser = parse_preset)]
     preset: sim::Preset,
     /// Play a trained checkpoint's mean action, without the Gaussian noise it was trained with
-    /// (`policy_std`).
+    /// (`policy_std`, `action_noise`; K-MAC's noise on the activations as its expectation):
+    /// nothing drawn.
     #[arg(long)]
     mean_action: bool,
     /// Print one JSON object instead of a table.

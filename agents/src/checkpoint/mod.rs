@@ -91,6 +91,12 @@ pub struct Checkpoint {
     /// How it was trained, if `rally train` made it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub training: Option<Training>,
+    /// A way of playing, never written to the file: K-MAC plays the expectation of the training
+    /// noise on its activations (`controller.activation_noise`) instead of drawing it from the
+    /// player's seeded stream as training's environment did (the mean action's play, which draws
+    /// nothing; see `PlayerSpec::mean_action`).
+    #[serde(skip)]
+    pub expected_activation_noise: bool,
 }
 
 /// A trained checkpoint's provenance: what made it, from what, how long, how well it did in training.
@@ -522,6 +528,7 @@ impl Checkpoint {
             action_noise: None,
             grip_floor: None,
             training: None,
+            expected_activation_noise: false,
         }
     }
 
@@ -555,6 +562,7 @@ impl Checkpoint {
             action_noise: None,
             grip_floor,
             training: None,
+            expected_activation_noise: false,
         };
         c.validate(model)?;
         Ok(c)

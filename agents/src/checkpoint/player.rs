@@ -49,7 +49,13 @@ impl CheckpointPlayer {
             mean: Vec::new(),
             seed,
             noise: noise_stream(seed),
-        })
+        }
+        .with_noise_restarted())
+    }
+
+    fn with_noise_restarted(mut self) -> CheckpointPlayer {
+        self.restart_noise();
+        self
     }
 
     /// The planner's current command (the plan and its absolute strike time), if a ball is coming.
@@ -64,16 +70,35 @@ impl CheckpointPlayer {
     }
 }
 
+impl CheckpointPlayer {
+    /// Restarts the noise streams of agent seed `self.seed`: the action noise's, and K-MAC's on the
+    /// activations when the checkpoint was trained with it (a stream of its own), unless it plays
+    /// that noise's expectation.
+    fn restart_noise(&mut self) {
+        self.noise = noise_stream(self.seed);
+        if !self.checkpoint.expected_activation_noise {
+            if let ControllerSpec::Kmac {
+                activation_noise: Some(sigma),
+                ..
+            } = self.checkpoint.controller
+            {
+                let seed = crate::seeds::mix64(self.seed ^ 0x6163_745f_6e6f_6973);
+                self.mapper.set_activation_noise(sigma, seed);
+            }
+        }
+    }
+}
+
 impl Player for CheckpointPlayer {
     fn reset(&mut self) {
         self.observer.reset(self.seed);
-        self.noise = noise_stream(self.seed);
+        self.restart_noise();
     }
 
     fn reseed(&mut self, seed: u64) {
         self.seed = seed;
         self.observer.reset(seed);
-        self.noise = noise_stream(seed);
+        self.restart_noise();
     }
 
     fn act(

@@ -89,10 +89,10 @@ pub struct Kmac {
     pub activation_clamp: Option<[f64; 2]>,
     /// Training noise on the activations: σ and its seeded stream (the official code's 0.1).
     activation_noise: Option<(f64, sim::rng::Rng)>,
-    /// Play: the σ of the activation noise the policy was trained with, played as its expectation
-    /// (each control is [`clamped_normal_mean`] of the noiseless one, deterministic: the mean
-    /// control of training, a first-order match of its activations, whose dynamics rise faster than
-    /// they fall); ignored while training noise is drawn.
+    /// Play without draws (a checkpoint's mean action): the σ of the activation noise the policy
+    /// was trained with, played as its expectation (each control is [`clamped_normal_mean`] of the
+    /// noiseless one: the mean control of training, only a first-order match of its activations,
+    /// whose dynamics rise faster than they fall); ignored while the noise is drawn.
     pub expected_activation_noise: Option<f64>,
     target: MuscleGeometry,
     current: MuscleGeometry,

@@ -177,8 +177,9 @@ pub enum ControllerSpec {
         /// The σ of the Gaussian noise on the activation targets the policy was trained with
         /// (`activation_noise` of the training configuration). Before the clamp that noise is
         /// rectified at the lower bound, so a muscle K-MAC leaves relaxed trains at a mean control
-        /// of about σ/√(2π); in play each control is that expectation, with no noise drawn (see
-        /// [`clamped_normal_mean`]). Absent: the controls as computed.
+        /// of about σ/√(2π). A checkpoint player draws it as training did, from a seeded stream of
+        /// its own; its mean action plays the expectation (see [`clamped_normal_mean`]). Absent:
+        /// the controls as computed.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         activation_noise: Option<f64>,
     },

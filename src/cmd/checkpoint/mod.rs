@@ -82,8 +82,8 @@ enum CheckpointCommand {
         #[arg(long)]
         method: String,
         /// `rally train`'s configuration whose [controller] section to use (gains, K-MAC's
-        /// activation clamp and activation noise — a K-MAC trained with that noise plays its
-        /// expectation; set it to 0 to play the activations as computed — and the grip floor;
+        /// activation clamp and activation noise — a K-MAC trained with that noise draws it in play
+        /// as training did; set it to 0 to play the activations as computed — and the grip floor;
         /// default: the built-in defaults).
         #[arg(long)]
         config: Option<PathBuf>,

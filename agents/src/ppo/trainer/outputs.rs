@@ -184,6 +184,7 @@ impl Trainer {
                 noise_scale: None,
                 ablation: (!self.config.ablation.is_none()).then_some(self.config.ablation),
             }),
+            expected_activation_noise: false,
         })
     }
 }
