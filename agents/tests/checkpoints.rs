@@ -108,7 +108,8 @@ fn a_checkpoint_plays_the_action_noise_it_was_trained_with_and_mean_action_drops
 }
 
 #[test]
-fn a_kmac_checkpoint_draws_its_activation_noise_in_play_and_its_mean_action_plays_the_expectation() {
+fn a_kmac_checkpoint_draws_its_activation_noise_in_play_and_its_mean_action_plays_the_expectation()
+{
     // K-MAC trained with σ 0.1 on its activation targets (the official form, clamped): the player
     // draws that noise as training did, seeded; the mean action draws nothing and plays each
     // control's expectation under the clamp, E[clip(u + σZ)], from the noiseless control u.
@@ -152,7 +153,11 @@ fn a_kmac_checkpoint_draws_its_activation_noise_in_play_and_its_mean_action_play
                 "muscle {a}: mean action {m}, bound {u}, E from the bound {at}"
             );
         }
-        assert!((lo..=hi).contains(&drawn[0][a]), "muscle {a}: {}", drawn[0][a]);
+        assert!(
+            (lo..=hi).contains(&drawn[0][a]),
+            "muscle {a}: {}",
+            drawn[0][a]
+        );
         if (drawn[0][a] - u).abs() > 1e-6 && (drawn[0][a] - expected).abs() > 1e-6 {
             moved += 1;
         }
