@@ -225,11 +225,13 @@ fn intro(s: &mut String, args: &ReproduceArgs, model: &sim::model::Model) {
     );
     let _ = writeln!(
         s,
-        "A trained checkpoint plays the Gaussian policy PPO trained (`policy_std`), and the action noise \
-         its training environment added after the clip where the configuration had one (`action_noise`); \
-         that noise comes from the agent's seeded stream, so every number here is a function of the seed. \
-         The rows marked *mean action* play the same network without either, as rsl_rl's \
-         `act_inference` does.\n"
+        "A trained checkpoint plays as it was trained: the Gaussian policy PPO trained (`policy_std`), \
+         the action noise its training environment added after the clip where the configuration had \
+         one (`action_noise`), and K-MAC's noise on its activation targets where it trained with it \
+         (`controller.activation_noise`); that noise comes from the agent's seeded streams, so every \
+         number here is a function of the seed. The rows marked *mean action* play the same network \
+         drawing nothing, as rsl_rl's `act_inference` does (K-MAC's activation noise as its \
+         expectation).\n"
     );
 }
 
@@ -356,8 +358,9 @@ fn provenance(s: &mut String, rows: &[Row]) {
             {
                 let _ = writeln!(
                     s,
-                    "  (trained with Gaussian noise σ {sigma} on its activation targets: it plays \
-                     each activation as the mean of the clamped noisy one, docs/design.md §6)"
+                    "  (trained with Gaussian noise σ {sigma} on its activation targets: it draws \
+                     that noise in play as in training; its mean action plays each control as the \
+                     mean of the clamped noisy one, docs/design.md §6)"
                 );
             }
         }
