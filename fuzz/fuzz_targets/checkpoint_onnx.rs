@@ -39,6 +39,7 @@ fuzz_target!(|data: &[u8]| {
         action_noise: None,
         grip_floor: None,
         training: None,
+        expected_activation_noise: false,
     };
     let text = serde_json::to_string(&c).unwrap();
     if let Ok(c) = Checkpoint::from_json(&text, m) {
