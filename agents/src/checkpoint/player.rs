@@ -38,7 +38,7 @@ impl CheckpointPlayer {
         seed: u64,
     ) -> Result<CheckpointPlayer, CheckpointError> {
         let network = checkpoint.network()?;
-        Ok(CheckpointPlayer {
+        let mut player = CheckpointPlayer {
             network,
             observer: Observer::new(model, checkpoint.observation.blocks.clone(), seed)
                 .with_bounce(bounce),
@@ -49,13 +49,9 @@ impl CheckpointPlayer {
             mean: Vec::new(),
             seed,
             noise: noise_stream(seed),
-        }
-        .with_noise_restarted())
-    }
-
-    fn with_noise_restarted(mut self) -> CheckpointPlayer {
-        self.restart_noise();
-        self
+        };
+        player.restart_noise();
+        Ok(player)
     }
 
     /// The planner's current command (the plan and its absolute strike time), if a ball is coming.
@@ -63,14 +59,6 @@ impl CheckpointPlayer {
         self.observer.command()
     }
 
-    /// The network's output at the last `act`: the mean of its Gaussian policy, before the noise
-    /// and the clip to [−1, 1], in the controller's layout.
-    pub fn last_mean(&self) -> &[f64] {
-        &self.mean
-    }
-}
-
-impl CheckpointPlayer {
     /// Restarts the noise streams of agent seed `self.seed`: the action noise's, and K-MAC's on the
     /// activations when the checkpoint was trained with it (a stream of its own), unless it plays
     /// that noise's expectation.
@@ -86,6 +74,12 @@ impl CheckpointPlayer {
                 self.mapper.set_activation_noise(sigma, seed);
             }
         }
+    }
+
+    /// The network's output at the last `act`: the mean of its Gaussian policy, before the noise
+    /// and the clip to [−1, 1], in the controller's layout.
+    pub fn last_mean(&self) -> &[f64] {
+        &self.mean
     }
 }
 
