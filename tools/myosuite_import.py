@@ -26,6 +26,7 @@ Prints one JSON line describing what was written. Exit status 3 means an unexpec
 release this script does not know); the message says what differed.
 """
 import json
+import math
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
@@ -151,12 +152,19 @@ def weld_paddle(root, ref):
     mujoco.mj_kinematics(ref, d)
     hb = mujoco.mj_name2id(ref, mujoco.mjtObj.mjOBJ_BODY, PALM)
     pb = mujoco.mj_name2id(ref, mujoco.mjtObj.mjOBJ_BODY, PADDLE)
-    rel_pos = d.xmat[hb].reshape(3, 3).T @ (d.xpos[pb] - d.xpos[hb])
+    # Plain Python floats in a fixed order, not numpy's matmul and norm: those call the BLAS, whose
+    # kernel (chosen at run time for the CPU) changes the last bits, and so the file, from one machine
+    # to another. MuJoCo's own functions are the same code on every machine.
+    r = [float(v) for v in d.xmat[hb]]
+    dp = [float(d.xpos[pb][i]) - float(d.xpos[hb][i]) for i in range(3)]
+    rel_pos = [r[i] * dp[0] + r[3 + i] * dp[1] + r[6 + i] * dp[2] for i in range(3)]
     inv = np.zeros(4)
     mujoco.mju_negQuat(inv, d.xquat[hb])
-    rel_quat = np.zeros(4)
-    mujoco.mju_mulQuat(rel_quat, inv, d.xquat[pb])
-    rel_quat /= np.linalg.norm(rel_quat)
+    q = np.zeros(4)
+    mujoco.mju_mulQuat(q, inv, d.xquat[pb])
+    q = [float(v) for v in q]
+    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    rel_quat = [v / norm for v in q]
     for j in paddle.findall("joint") + paddle.findall("freejoint"):
         paddle.remove(j)
     blade = paddle.find("geom[@name='pad']")
