@@ -206,6 +206,9 @@ fn reproduce_ablations_groups_the_checkpoints_by_variant_over_their_seeds() {
         md.contains("**Position-only** (paper:") && md.contains("not run"),
         "{md}"
     );
+    // One seed has no spread: its rates stand alone, and its finding says it rests on one seed.
+    assert!(md.contains("| Without-Planner | 1 | 0.0 | 0.0 |"), "{md}");
+    assert!(md.contains("hit 0.0%, success 0.0% (one seed)"), "{md}");
     // Untrained policies hit nothing: Without-Planner's "fails" holds, Without-Task's finding not.
     assert!(md.contains("**reproduces** (rule: hit below 10%"), "{md}");
     assert!(
