@@ -157,7 +157,7 @@ fn play_pairings(args: &ReproduceArgs, body: &super::Body) -> Vec<Pairing> {
             None => {
                 let path = args.checkpoints().join(format!("{name}.json"));
                 let text = std::fs::read_to_string(&path)
-                    .map_err(|_| format!("not trained yet (no {})", path.display()))?;
+                    .map_err(|_| format!("no checkpoint ({} is absent)", path.display()))?;
                 Checkpoint::from_json(&text, model)
                     .map(|c| PlayerSpec::Checkpoint(std::sync::Arc::new(c)))
                     .map_err(|e| format!("{}: {e}", path.display()))

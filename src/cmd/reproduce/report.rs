@@ -279,7 +279,7 @@ fn results_table(s: &mut String, rows: &[Row]) {
             None => {
                 let _ = writeln!(
                     s,
-                    "| {} | not trained yet (no checkpoint) | | | | {} | {} | {} | | |",
+                    "| {} | no checkpoint | | | | {} | {} | {} | | |",
                     r.label, paper.0, paper.1, paper.2
                 );
             }
