@@ -1,6 +1,10 @@
-//! Where a checkpoint's strokes go wrong: for each single-serve episode, the planned outgoing ball
-//! velocity against the one the paddle produced, and the predicted landing of each. A diagnosis
-//! aid: `cargo run --release --example strokes -- CHECKPOINT [p2|rally] [episodes] [seed]`.
+//! Where a checkpoint's strokes go wrong: for each single-serve episode with a hit, the planned
+//! outgoing ball velocity against the one the paddle produced, the predicted landing of each, and
+//! the paddle at the contact step against the command: the blade centre's distance from the strike
+//! point, the paddle frame origin's velocity (what the reward's velocity term sees) and the blade
+//! centre's against the racket's, and the angle between the blade's normal (either face) and the
+//! planned one. All in the robot's frame. A diagnosis aid: `cargo run --release --example strokes
+//! -- CHECKPOINT [p2|rally] [episodes] [seed]` (`RALLY_MODEL=FILE` for another robot).
 mod common;
 
 use agents::player::Player;
@@ -30,7 +34,7 @@ fn main() {
     let mut env = bench.single();
     let mut player = bench.player();
     let model = bench.model.clone();
-    println!("end,plan_vx,plan_vy,plan_vz,act_vx,act_vy,act_vz,plan_land_x,plan_land_y,act_land_x,act_land_y,pad_err_pos,pad_vx,pad_vy,pad_vz,rkt_vx,rkt_vy,rkt_vz");
+    println!("end,plan_vx,plan_vy,plan_vz,act_vx,act_vy,act_vz,plan_land_x,plan_land_y,act_land_x,act_land_y,blade_err_pos,pad_vx,pad_vy,pad_vz,rkt_vx,rkt_vy,rkt_vz,normal_err_deg,blade_vx,blade_vy,blade_vz");
     for i in 0..episodes {
         let (serve_seed, agent_seed) = agents::seeds::episode_seeds(seed, i);
         env.reset(kind, &mut Rng::seeded(serve_seed), None);
@@ -43,7 +47,10 @@ fn main() {
             }
             let plan = player.command().map(|(p, _)| *p);
             let pad_v = env.robot.paddle.lin_vel;
-            let pad_p = env.robot.paddle.pose.pos;
+            let (pad_p, pad_n) = agents::env::reward::blade(&env.robot);
+            // The blade centre's velocity: the paddle frame origin's plus the rotation's share.
+            let m = &env.robot.paddle;
+            let blade_v = m.lin_vel + m.ang_vel.cross(&(pad_p - m.pose.pos));
             let rep = env.step();
             let hit = rep
                 .events
@@ -57,11 +64,15 @@ fn main() {
                     let pl = landing(&p.strike_pos, &p.v_out, &bounce).unwrap_or_default();
                     let al = landing(&x, &v, &bounce).unwrap_or_default();
                     let pv = f.vector_from_world(&pad_v);
+                    let bv = f.vector_from_world(&blade_v);
                     let pp = f.point_from_world(&pad_p);
+                    let n = f.vector_from_world(&pad_n);
+                    let u = p.racket_quat * Vector3::z();
+                    let angle = n.dot(&u).abs().min(1.0).acos().to_degrees();
                     row = Some(format!(
-                        "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                        "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1},{:.3},{:.3},{:.3}",
                         p.v_out.x, p.v_out.y, p.v_out.z, v.x, v.y, v.z, pl.x, pl.y, al.x, al.y,
-                        (pp - p.strike_pos).norm(), pv.x, pv.y, pv.z, p.racket_vel.x, p.racket_vel.y, p.racket_vel.z
+                        (pp - p.strike_pos).norm(), pv.x, pv.y, pv.z, p.racket_vel.x, p.racket_vel.y, p.racket_vel.z, angle, bv.x, bv.y, bv.z
                     ));
                 }
             }

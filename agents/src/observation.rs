@@ -166,6 +166,37 @@ impl CommandVariant {
     }
 }
 
+/// How often the planner's command is made for one incoming ball (`replan` in a training
+/// configuration; a checkpoint records it with its observation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Replan {
+    /// Once, as soon as the ball flies towards the robot (ours, and every checkpoint before the
+    /// setting).
+    #[default]
+    Once,
+    /// Once more from the ball's real state after it has bounced on the robot's half and left the
+    /// table, keeping the first plan's outgoing velocity (the official code plans again there and
+    /// draws a new one): the first plan's predicted bounce is off by up to a few centimetres on the
+    /// soft table, the second has no bounce to predict.
+    AfterBounce,
+}
+
+impl Replan {
+    /// Whether this is the default, [`Replan::Once`] (which checkpoints leave out).
+    pub fn is_once(&self) -> bool {
+        *self == Replan::Once
+    }
+
+    /// The setting's name in a configuration (`once`, `after_bounce`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Replan::Once => "once",
+            Replan::AfterBounce => "after_bounce",
+        }
+    }
+}
+
 /// Names of the entries of an observation of `blocks` on `model`, in order.
 pub fn observation_names(model: &Model, blocks: &[ObsBlock]) -> Vec<String> {
     let space = ActionSpace::new(model);
@@ -181,6 +212,22 @@ pub struct Observer {
     plan: Option<(Plan, f64)>,
     rng: Rng,
     bounce: BounceModel,
+    replan: Replan,
+    /// Where the incoming ball is in its second plan's timeline.
+    stage: ReplanStage,
+    /// The ball's vertical velocity (robot frame) at the last update with a plan.
+    last_vz: f64,
+}
+
+/// The second plan's progress for the incoming ball.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ReplanStage {
+    /// Waiting for the bounce on this robot's half.
+    Incoming,
+    /// Bounced; waiting for the ball to leave the table.
+    Bounced,
+    /// Planned again (or not to be).
+    Done,
 }
 
 impl Observer {
@@ -192,7 +239,20 @@ impl Observer {
             plan: None,
             rng: Rng::seeded(seed),
             bounce: BounceModel::for_table(&arena::MYOCHALLENGE.table),
+            replan: Replan::Once,
+            stage: ReplanStage::Done,
+            last_vz: 0.0,
         }
+    }
+
+    /// Makes the command as `replan` says from the next incoming ball on.
+    pub fn set_replan(&mut self, replan: Replan) {
+        self.replan = replan;
+    }
+
+    /// How the command is made.
+    pub fn replan(&self) -> Replan {
+        self.replan
     }
 
     /// The same observer planning with `bounce` (the arena preset's table bounce; the default is
@@ -219,19 +279,55 @@ impl Observer {
     }
 
     /// Updates the command from the ball (world frame) at time `t`: plans once the ball flies towards
-    /// this robot, drops the plan once it flies away.
+    /// this robot (and, with [`Replan::AfterBounce`], once more when it has bounced on this robot's
+    /// half and left the table), drops the plan once it flies away.
     pub fn update_command(&mut self, robot: &Robot, ball: &BallState, t: f64) {
         let f = robot.frame;
         let pos = f.point_from_world(&ball.pos);
         let vel = f.vector_from_world(&ball.vel);
         if vel.x > 0.0 && pos.x < arena::STRIKE_PLANE_X {
-            if self.plan.is_none() {
-                if let Ok(p) =
-                    planner::plan(&pos, &vel, Some(Side::A), None, &mut self.rng, &self.bounce)
-                {
-                    self.plan = Some((p, t + p.t_strike));
+            match self.plan {
+                None => {
+                    if let Ok(p) =
+                        planner::plan(&pos, &vel, Some(Side::A), None, &mut self.rng, &self.bounce)
+                    {
+                        self.plan = Some((p, t + p.t_strike));
+                        self.stage = match self.replan {
+                            Replan::Once => ReplanStage::Done,
+                            Replan::AfterBounce => ReplanStage::Incoming,
+                        };
+                    }
+                }
+                Some((first, _)) => {
+                    // A bounce on this half turns the falling ball up; the contact with the soft
+                    // table lasts about a control step, so the second plan waits for the ball to
+                    // be clear of it.
+                    if self.stage == ReplanStage::Incoming
+                        && self.last_vz < 0.0
+                        && vel.z > 0.0
+                        && pos.x > 0.0
+                    {
+                        self.stage = ReplanStage::Bounced;
+                    }
+                    if self.stage == ReplanStage::Bounced
+                        && vel.z > 0.0
+                        && pos.z > arena::TABLE_TOP_Z + arena::BALL_RADIUS
+                    {
+                        self.stage = ReplanStage::Done;
+                        if let Ok(p) = planner::plan(
+                            &pos,
+                            &vel,
+                            Some(Side::A),
+                            Some(first.v_out),
+                            &mut self.rng,
+                            &self.bounce,
+                        ) {
+                            self.plan = Some((p, t + p.t_strike));
+                        }
+                    }
                 }
             }
+            self.last_vz = vel.z;
         } else if vel.x < 0.0 {
             self.plan = None;
         }

@@ -27,6 +27,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
             blocks,
             mean: vec![0.0; n],
             std: vec![1.0; n],
+            replan: Default::default(),
         },
         policy: None,
         onnx: Some(OnnxPolicy::from_bytes(bytes)),

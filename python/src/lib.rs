@@ -297,7 +297,7 @@ impl VecEnv {
 /// A checkpoint (its JSON text) around an ONNX network trained elsewhere, as `rally checkpoint
 /// from-onnx` writes it: `method`'s controller (gains, K-MAC's clamp, its activation noise, drawn
 /// in play as in training, and the grip floor from `config`, a `rally train` configuration file, or
-/// its defaults), `obs_mean` and `obs_std` applied
+/// its defaults; the command's `replan` from it too), `obs_mean` and `obs_std` applied
 /// before the network (both or neither), validated against the robot `model` first.
 #[pyfunction]
 #[pyo3(signature = (onnx, method, name, model="default", obs_mean=None, obs_std=None, config=None))]
@@ -319,7 +319,7 @@ fn checkpoint_from_onnx(
         _ => return Err(bad("obs_mean", "give obs_mean and obs_std together")),
     };
     let grip = (c.controller.grip_floor > 0.0).then_some(c.controller.grip_floor);
-    let ck = agents::checkpoint::Checkpoint::from_onnx(
+    let mut ck = agents::checkpoint::Checkpoint::from_onnx(
         &body,
         name,
         c.controller(m, &body),
@@ -328,6 +328,8 @@ fn checkpoint_from_onnx(
         grip,
     )
     .map_err(|e| bad(&e.field, &e.message))?;
+    // The player makes the command as the network's training did.
+    ck.observation.replan = c.replan;
     serde_json::to_string(&ck).map_err(|e| bad("checkpoint", e))
 }
 

@@ -1,5 +1,6 @@
-//! What the checkpoint diagnosis examples share: the default model, a checkpoint read from the
-//! command line, the MyoChallenge arena and its bounce model.
+//! What the checkpoint diagnosis examples share: the robot model (the default body, or the MJCF file
+//! named by `RALLY_MODEL`, e.g. the imported MyoSuite robot, with its arena configuration), a
+//! checkpoint read from the command line, the MyoChallenge arena and its bounce model.
 #![allow(dead_code)]
 
 use agents::checkpoint::{Checkpoint, CheckpointPlayer};
@@ -8,7 +9,7 @@ use std::sync::Arc;
 
 /// The arena an example plays in, with the checkpoint it diagnoses.
 pub struct Bench {
-    /// The default robot model.
+    /// The robot model: the default body, or `RALLY_MODEL`'s file.
     pub model: Arc<Model>,
     /// The checkpoint, validated against `model`.
     pub checkpoint: Arc<Checkpoint>,
@@ -16,14 +17,27 @@ pub struct Bench {
     pub preset: sim::arena::Preset,
     /// Their bounce model, for the planner.
     pub bounce: sim::predict::BounceModel,
-    /// Default arena constants.
+    /// Arena constants: the default body's, or MyoSuite's robot's with `RALLY_MODEL`.
     pub config: sim::config::ArenaConfig,
 }
 
 impl Bench {
-    /// Reads the checkpoint at `path`; panics with the reason if it does not load.
+    /// Reads the checkpoint at `path`; panics with the reason if it does not load. With
+    /// `RALLY_MODEL=FILE` set, the robot is that MJCF file (MyoSuite's robot: `rally model import
+    /// myosuite` writes it) and the arena configuration MyoSuite's robot's.
     pub fn load(path: &str) -> Bench {
-        let model = Arc::new(sim::config::default_model());
+        let (model, config) = match std::env::var("RALLY_MODEL") {
+            Ok(file) => (
+                sim::mjcf::load(std::path::Path::new(&file), &|p| std::fs::read_to_string(p))
+                    .unwrap_or_else(|e| panic!("RALLY_MODEL={file}: {e}")),
+                sim::config::ArenaConfig::myochallenge(),
+            ),
+            Err(_) => (
+                sim::config::default_model(),
+                sim::config::ArenaConfig::default(),
+            ),
+        };
+        let model = Arc::new(model);
         let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
         let checkpoint = Arc::new(
             Checkpoint::from_json(&text, &model).unwrap_or_else(|e| panic!("{path}: {e}")),
@@ -34,7 +48,7 @@ impl Bench {
             model,
             checkpoint,
             preset,
-            config: sim::config::ArenaConfig::default(),
+            config,
         }
     }
 
@@ -47,7 +61,7 @@ impl Bench {
     /// A single-serve environment.
     pub fn single(&self) -> sim::episode::SingleServe {
         sim::episode::SingleServe::new(self.model.clone(), &self.config, self.preset)
-            .expect("default arena")
+            .expect("the arena configuration fits the model")
     }
 }
 

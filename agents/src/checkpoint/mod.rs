@@ -46,6 +46,9 @@ pub struct ObservationSpec {
     pub mean: Vec<f64>,
     /// Per-entry standard deviation (> 0).
     pub std: Vec<f64>,
+    /// How the player makes the command (checkpoints before the setting: once; left out then).
+    #[serde(default, skip_serializing_if = "crate::observation::Replan::is_once")]
+    pub replan: crate::observation::Replan,
 }
 
 /// A policy checkpoint.
@@ -521,6 +524,7 @@ impl Checkpoint {
                 blocks,
                 mean: vec![0.0; obs],
                 std: vec![1.0; obs],
+                replan: Default::default(),
             },
             policy: Some(Mlp { layers }),
             onnx: None,
@@ -555,7 +559,12 @@ impl Checkpoint {
             name: name.into(),
             model: sim::config::robot_name(model).into(),
             controller,
-            observation: ObservationSpec { blocks, mean, std },
+            observation: ObservationSpec {
+                blocks,
+                mean,
+                std,
+                replan: Default::default(),
+            },
             policy: None,
             onnx: Some(OnnxPolicy::from_bytes(onnx)),
             policy_std: None,

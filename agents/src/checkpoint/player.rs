@@ -38,10 +38,12 @@ impl CheckpointPlayer {
         seed: u64,
     ) -> Result<CheckpointPlayer, CheckpointError> {
         let network = checkpoint.network()?;
+        let mut observer =
+            Observer::new(model, checkpoint.observation.blocks.clone(), seed).with_bounce(bounce);
+        observer.set_replan(checkpoint.observation.replan);
         let mut player = CheckpointPlayer {
             network,
-            observer: Observer::new(model, checkpoint.observation.blocks.clone(), seed)
-                .with_bounce(bounce),
+            observer,
             mapper: ActionMapper::new(model, &checkpoint.controller),
             checkpoint,
             obs: Vec::new(),

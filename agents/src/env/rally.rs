@@ -101,6 +101,18 @@ impl RallyEnv {
         })
     }
 
+    /// Makes both sides' commands as `replan` says (training: `replan`).
+    pub fn set_replan(&mut self, replan: crate::observation::Replan) {
+        for seat in &mut self.seats {
+            seat.observer.set_replan(replan);
+        }
+    }
+
+    /// How both sides' commands are made.
+    pub fn replan(&self) -> crate::observation::Replan {
+        self.seats[0].observer.replan()
+    }
+
     /// Observation length (per side).
     pub fn obs_dim(&self) -> usize {
         self.seats[0].observer.size()

@@ -389,6 +389,10 @@ pub struct TrainConfig {
     /// The rules the task terms judge a return by: ours (the default) or the official code's
     /// margins (see [`crate::env::TaskRules`]).
     pub task_rules: crate::env::TaskRules,
+    /// How often the planner's command is made for one ball: `once` (ours, the default) or
+    /// `after_bounce`, once more from the ball's real state after its bounce (the official code's
+    /// second plan; see [`crate::observation::Replan`]). The checkpoint records it.
+    pub replan: crate::observation::Replan,
 }
 
 /// A ball bank for the single-serve environment (ours; see [`crate::env::BallBank`]): the file

@@ -83,8 +83,8 @@ enum CheckpointCommand {
         method: String,
         /// `rally train`'s configuration whose [controller] section to use (gains, K-MAC's
         /// activation clamp and activation noise — a K-MAC trained with that noise draws it in play
-        /// as training did; set it to 0 to play the activations as computed — and the grip floor;
-        /// default: the built-in defaults).
+        /// as training did; set it to 0 to play the activations as computed — and the grip floor),
+        /// and its `replan` (how the command is made); default: the built-in defaults.
         #[arg(long)]
         config: Option<PathBuf>,
         /// JSON {"mean": [...], "std": [...]} applied to the observation before the network, as

@@ -133,7 +133,7 @@ pub fn from_onnx(model: &Model, a: &FromOnnx) -> Result<(), CliError> {
         }
     };
     let grip = (config.controller.grip_floor > 0.0).then_some(config.controller.grip_floor);
-    let c = Checkpoint::from_onnx(
+    let mut c = Checkpoint::from_onnx(
         model,
         a.name,
         config.controller(method, model),
@@ -142,6 +142,8 @@ pub fn from_onnx(model: &Model, a: &FromOnnx) -> Result<(), CliError> {
         grip,
     )
     .map_err(|e| CliError::Usage(format!("{}: {e}", a.file.display())))?;
+    // The player makes the command as the network's training did.
+    c.observation.replan = config.replan;
     let text = serde_json::to_string(&c).map_err(anyhow::Error::from)?;
     match a.out {
         Some(out) => {

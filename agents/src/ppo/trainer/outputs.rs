@@ -150,6 +150,7 @@ impl Trainer {
                 blocks: self.config.obs_blocks(),
                 mean: self.normalizer.mean.clone(),
                 std: self.normalizer.scale(),
+                replan: self.config.replan,
             },
             policy: Some(self.net.actor_mlp().map_err(e)?),
             onnx: None,
