@@ -32,6 +32,7 @@ fuzz_target!(|data: &[u8]| {
             blocks: ObsBlock::ALL.to_vec(),
             mean: vec![0.0; n],
             std: vec![1.0; n],
+            replan: Default::default(),
         },
         policy: None,
         onnx: Some(OnnxPolicy::from_bytes(data)),
