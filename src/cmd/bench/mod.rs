@@ -66,9 +66,10 @@ pub struct BenchArgs {
     /// Also time MuJoCo (`mj_step`, nstep per serve) on the reference scene's ball, table and net (sim/tests/fixtures/myosuite_tt_ball_only.xml) in this run.
     #[arg(long)]
     mujoco: bool,
-    /// Python interpreter that has the `mujoco` package.
-    #[arg(long, default_value = "python3")]
-    python: PathBuf,
+    /// Python interpreter that has the `mujoco` package [default: the one `rally model import
+    /// myosuite` installed, DATA/venv-myosuite/bin/python, if it exists; else python3].
+    #[arg(long)]
+    python: Option<PathBuf>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -423,10 +424,24 @@ fn bench_server(args: &BenchArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+impl BenchArgs {
+    /// `--python`, else the import's interpreter (it has MuJoCo, pinned), else `python3` on PATH.
+    fn python(&self) -> PathBuf {
+        self.python.clone().unwrap_or_else(|| {
+            let venv = crate::cmd::model::data_dir().join("venv-myosuite/bin/python");
+            if venv.exists() {
+                venv
+            } else {
+                PathBuf::from("python3")
+            }
+        })
+    }
+}
+
 /// `rally bench ball`: ball-world steps per second, with MuJoCo's beside them on `--mujoco`.
 fn bench_ball(args: &BenchArgs) -> Result<(), CliError> {
     let mujoco = if args.mujoco {
-        Some(mujoco_steps_per_second(&args.python, args.seconds)?)
+        Some(mujoco_steps_per_second(&args.python(), args.seconds)?)
     } else {
         None
     };
@@ -477,7 +492,7 @@ fn bench_robot(args: &BenchArgs) -> Result<(), CliError> {
     let r = robot::measure(
         &args.model,
         args.seconds,
-        args.mujoco.then_some(args.python.as_path()),
+        args.mujoco.then_some(args.python().as_path()),
     )?;
     if args.json {
         println!("{r}");
