@@ -168,3 +168,38 @@ fn bad_models_and_bad_configurations_exit_2() {
     );
     refused(&["model", "kinematics", &robot()], &["--qpos"]);
 }
+
+/// `rally bench --mujoco` times MuJoCo with the import's interpreter when there is one (it has the
+/// pinned MuJoCo), with `--python` when given: a stand-in interpreter in a data directory shows which
+/// one ran.
+#[test]
+fn bench_times_mujoco_with_the_imports_python_by_default() {
+    use std::os::unix::fs::PermissionsExt;
+    let data = std::env::temp_dir().join(format!("rally-bench-python-{}", std::process::id()));
+    let bin = data.join("venv-myosuite/bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let fake = bin.join("python");
+    std::fs::write(
+        &fake,
+        "#!/bin/sh\necho '{\"steps_per_second\": 1000.0, \"mujoco_version\": \"the-imports\"}'\n",
+    )
+    .unwrap();
+    std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let bench = |extra: &[&str]| {
+        let mut args = vec!["bench", "ball", "--mujoco", "--seconds", "0.05", "--json"];
+        args.extend_from_slice(extra);
+        Command::new(env!("CARGO_BIN_EXE_rally"))
+            .args(&args)
+            .env("RALLY_DATA_DIR", &data)
+            .output()
+            .expect("rally runs")
+    };
+    let v = json(&bench(&[]));
+    assert_eq!(v["mujoco_version"], "the-imports");
+    assert_eq!(v["mujoco_steps_per_second"], 1000.0);
+    // An interpreter given by name wins over the import's; one that does not exist is an error.
+    let out = bench(&["--python", "/nonexistent/python"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/python"));
+    std::fs::remove_dir_all(&data).ok();
+}
