@@ -231,6 +231,11 @@ enum ReplanStage {
 }
 
 impl Observer {
+    /// The muscles (actuator indices) the observation's muscle blocks list, in order.
+    pub fn muscles(&self) -> &[usize] {
+        &self.space.muscles
+    }
+
     /// An observer of `blocks` for `model`.
     pub fn new(model: &Model, blocks: Vec<ObsBlock>, seed: u64) -> Observer {
         Observer {

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use agents::ppo::store::{RunDir, WarmOptimiser};
 use agents::ppo::trainer::Trainer;
-use agents::ppo::{Method, TrainConfig};
+use agents::ppo::{CriticInput, Method, TrainConfig};
 
 fn model() -> Arc<sim::model::Model> {
     Arc::new(sim::config::default_model())
@@ -187,17 +187,20 @@ fn a_short_kmac_run_learns_a_signal() {
 #[test]
 fn a_resumed_run_is_the_same_run_bit_for_bit() {
     // In both environments: single serves, and the self-play rally (two robots per environment).
+    // And with the privileged critic (its own statistics are saved and resumed too).
     let mut rally = small(3, 24, 2);
     rally.env = agents::ppo::TrainEnv::Rally;
     rally.ppo.hidden = vec![16, 16];
-    for cfg in [small(4, 8, 2), rally] {
+    let mut privileged = small(4, 8, 2);
+    privileged.ppo.critic = CriticInput::Privileged;
+    for (k, cfg) in [small(4, 8, 2), rally, privileged].into_iter().enumerate() {
         let m = model();
         let mut straight = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 11).unwrap();
         for _ in 0..4 {
             straight.iterate().unwrap();
         }
         let dir = std::env::temp_dir().join(format!(
-            "rally-ppo-resume-{}-{}",
+            "rally-ppo-resume-{}-{k}-{}",
             cfg.env.name(),
             std::process::id()
         ));
@@ -220,6 +223,7 @@ fn a_resumed_run_is_the_same_run_bit_for_bit() {
         assert_eq!(weights(&resumed), weights(&straight), "{}", cfg.env.name());
         assert_eq!(resumed.adam.lr.to_bits(), straight.adam.lr.to_bits());
         assert_eq!(resumed.normalizer, straight.normalizer);
+        assert_eq!(resumed.critic_normalizer, straight.critic_normalizer);
         let strip = |rows: &[agents::ppo::trainer::CurveRow]| -> Vec<(u64, u64, u64)> {
             rows.iter()
                 .map(|r| (r.iteration, r.episodes, r.value_loss.to_bits()))
@@ -597,4 +601,71 @@ fn the_task_rules_setting_reaches_both_training_environments() {
         bad.to_string().contains("ours") && bad.to_string().contains("official"),
         "{bad}"
     );
+}
+
+#[test]
+fn a_privileged_critic_sees_what_the_policy_does_not_and_only_the_critic_does() {
+    let m = model();
+    let mut cfg = small(4, 8, 2);
+    cfg.ppo.critic = CriticInput::Privileged;
+    let mut t = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 5).unwrap();
+    for _ in 0..2 {
+        t.iterate().unwrap();
+    }
+    // The actor reads the observation; the critic reads it and, after it, the elapsed share of the
+    // episode, one velocity per muscle, the paddle's mass and the ball's friction.
+    let obs = t.obs_dim();
+    let muscles = m.muscles().count();
+    assert_eq!(t.net.actor[0].w.as_tensor().dims(), &[32, obs]);
+    assert_eq!(
+        t.net.critic[0].w.as_tensor().dims(),
+        &[32, obs + muscles + 3]
+    );
+    let stats = t.critic_normalizer.as_ref().expect("privileged statistics");
+    let n = stats.mean.len();
+    assert_eq!(n, muscles + 3);
+    assert!(
+        stats.mean[0] > 0.0 && stats.mean[0] < 1.0,
+        "elapsed share {}",
+        stats.mean[0]
+    );
+    assert!(stats.mean[1..n - 2].iter().all(|v| v.is_finite()));
+    assert!(
+        stats.mean[1..n - 2].iter().any(|v| *v != 0.0),
+        "muscles moved"
+    );
+    assert!(stats.mean[n - 2] > 0.0, "the paddle has mass");
+    assert_eq!(stats.mean[n - 1], 1.0, "the built-in arena's ball friction");
+    // The checkpoint's policy is the actor alone: it plays as any other.
+    let ck = t.checkpoint("privileged", "test", "none").unwrap();
+    assert_eq!(ck.policy.as_ref().unwrap().layers[0].weights[0].len(), obs);
+
+    // The default critic sees the actor's observation, and its state says nothing of the switch.
+    let plain = Trainer::new(m.clone(), Method::Kmac, small(4, 8, 2), 5).unwrap();
+    assert_eq!(plain.net.critic[0].w.as_tensor().dims(), &[32, obs]);
+    assert!(plain.critic_normalizer.is_none());
+    let dir = std::env::temp_dir().join(format!("rally-ppo-critic-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = RunDir::open(&dir).unwrap();
+    run.save_state(&plain).unwrap();
+    let state = std::fs::read_to_string(dir.join("resume/state.json")).unwrap();
+    assert!(
+        !state.contains("critic"),
+        "a default run's state names no critic setting"
+    );
+    // A warm start keeps its critic: one of the other kind is refused.
+    let mut other = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 6).unwrap();
+    let err = run
+        .warm_start(&mut other, WarmOptimiser::Carry)
+        .unwrap_err();
+    assert!(err.contains("ppo.critic"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+
+    // Set in a configuration file; refused in the rally environment, which has no such input.
+    let parsed: TrainConfig = toml::from_str("[ppo]\ncritic = \"privileged\"\n").unwrap();
+    assert_eq!(parsed.ppo.critic, CriticInput::Privileged);
+    let mut rally = parsed.clone();
+    rally.env = agents::ppo::TrainEnv::Rally;
+    let err = rally.validate().unwrap_err();
+    assert!(err.contains("ppo.critic"), "{err}");
 }

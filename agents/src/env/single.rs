@@ -138,6 +138,26 @@ impl Env {
         &self.obs
     }
 
+    /// Entries of [`Env::privileged_into`].
+    pub fn privileged_dim(&self) -> usize {
+        self.observer.muscles().len() + 3
+    }
+
+    /// What the official code's critic sees beyond the observation (`ppo.critic = "privileged"`),
+    /// appended to `out`: the episode's elapsed share of its time limit, every observed muscle's
+    /// velocity over its length range, the paddle's mass (kg) and the ball's friction.
+    pub fn privileged_into(&self, out: &mut Vec<f64>) {
+        let ep = &self.episode;
+        out.push(ep.steps as f64 / ep.max_steps.max(1) as f64);
+        let model = ep.robot.held_model();
+        out.extend(self.observer.muscles().iter().map(|&a| {
+            let lr = model.actuators[a].lengthrange;
+            ep.robot.data.actuator_velocity[a] / (lr[1] - lr[0]).max(1e-9)
+        }));
+        out.push(ep.robot.paddle_mass());
+        out.push(ep.ball_friction);
+    }
+
     /// A new episode from `seed`; returns the first observation.
     pub fn reset(&mut self, seed: u64) -> Vec<f64> {
         let (serve_seed, planner_seed) = crate::seeds::episode_seeds(seed, 0);

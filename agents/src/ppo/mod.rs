@@ -122,6 +122,20 @@ pub enum Schedule {
     LinearDecay,
 }
 
+/// What the critic sees.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CriticInput {
+    /// The actor's observation (every shipped configuration).
+    #[default]
+    Actor,
+    /// The actor's observation and what the robot does not observe, as the official code's critic
+    /// (single serves only): the episode's elapsed share of its time limit, every muscle's velocity
+    /// over its length range, the paddle's mass and the ball's friction (P2's draws), normalised by
+    /// running statistics of their own. The checkpoint's policy is unchanged: only training sees it.
+    Privileged,
+}
+
 /// PPO's hyperparameters. The official code's values (docs/design.md §11) are in the comments where ours
 /// differ; `config/train.toml` carries the same with both.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -180,6 +194,23 @@ pub struct PpoConfig {
     pub bound_coef: f64,
     /// Where the bound loss starts (the environment clips actions at ±1).
     pub bound: f64,
+    /// What the critic sees (official: the privileged observation; ours by default: the actor's).
+    #[serde(skip_serializing_if = "is_actor")]
+    pub critic: CriticInput,
+}
+
+impl CriticInput {
+    /// Its name in a configuration.
+    pub fn name(self) -> &'static str {
+        match self {
+            CriticInput::Actor => "actor",
+            CriticInput::Privileged => "privileged",
+        }
+    }
+}
+
+fn is_actor(c: &CriticInput) -> bool {
+    *c == CriticInput::Actor
 }
 
 impl PpoConfig {
@@ -218,6 +249,7 @@ impl Default for PpoConfig {
             max_std: None,
             max_std_steps: 0,
             bound_coef: 0.0,
+            critic: CriticInput::Actor,
             bound: 1.0,
         }
     }
@@ -543,6 +575,13 @@ impl TrainConfig {
             return Err(
                 "controller.action_noise, controller.activation_noise: the rally \
                         environment draws no training noise; set both to 0 to train in it"
+                    .into(),
+            );
+        }
+        if self.env == TrainEnv::Rally && self.ppo.critic == CriticInput::Privileged {
+            return Err(
+                "ppo.critic: \"privileged\" is for single serves; the rally environment's critic \
+                 sees the actor's observation"
                     .into(),
             );
         }

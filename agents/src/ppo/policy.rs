@@ -74,9 +74,11 @@ pub struct ActorCritic {
 impl ActorCritic {
     /// A fresh network: hidden layers `hidden` for both, σ = `init_std`, weights from `seed`. The
     /// actor's output layer starts 100× smaller than PyTorch's default, so the first mean action is
-    /// close to zero (the middle of every range) whatever the observation.
+    /// close to zero (the middle of every range) whatever the observation. The critic reads
+    /// `critic_obs` ≥ `obs` entries: the actor's observation, then what only the critic sees.
     pub fn new(
         obs: usize,
+        critic_obs: usize,
         actions: usize,
         hidden: &[usize],
         init_std: f64,
@@ -84,7 +86,7 @@ impl ActorCritic {
     ) -> Result<ActorCritic> {
         let mut rng = Rng::seeded(seed);
         let actor = mlp(&mut rng, obs, hidden, actions, 0.01)?;
-        let critic = mlp(&mut rng, obs, hidden, 1, 1.0)?;
+        let critic = mlp(&mut rng, critic_obs, hidden, 1, 1.0)?;
         let log_std = Var::from_tensor(&Tensor::from_vec(
             vec![init_std.ln() as f32; actions],
             actions,
@@ -113,7 +115,7 @@ impl ActorCritic {
         forward(&self.actor, obs)
     }
 
-    /// Values `[batch]`.
+    /// Values `[batch]` of the critic's inputs `[batch, critic_obs]`.
     pub fn value(&self, obs: &Tensor) -> Result<Tensor> {
         forward(&self.critic, obs)?.squeeze(1)
     }
@@ -167,7 +169,7 @@ mod tests {
 
     #[test]
     fn exported_actor_matches_the_candle_forward() {
-        let ac = ActorCritic::new(5, 3, &[8, 4], 0.5, 9).unwrap();
+        let ac = ActorCritic::new(5, 5, 3, &[8, 4], 0.5, 9).unwrap();
         // Scale the output layer up so the comparison is not of near-zero numbers.
         let last = ac.actor.last().unwrap();
         last.w.set(&(last.w.as_tensor() * 100.0).unwrap()).unwrap();
@@ -184,8 +186,8 @@ mod tests {
 
     #[test]
     fn same_seed_same_weights() {
-        let a = ActorCritic::new(4, 2, &[6], 1.0, 3).unwrap();
-        let b = ActorCritic::new(4, 2, &[6], 1.0, 3).unwrap();
+        let a = ActorCritic::new(4, 4, 2, &[6], 1.0, 3).unwrap();
+        let b = ActorCritic::new(4, 4, 2, &[6], 1.0, 3).unwrap();
         for ((_, x), (_, y)) in a.named().iter().zip(b.named()) {
             assert_eq!(
                 x.flatten_all().unwrap().to_vec1::<f32>().unwrap(),

@@ -50,6 +50,9 @@ pub struct RunState {
     pub progress: Progress,
     /// Observation statistics.
     pub normalizer: RunningNormalizer,
+    /// Statistics of what only a privileged critic sees (absent: the critic sees the observation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub critic_normalizer: Option<RunningNormalizer>,
     /// Adam's steps taken.
     pub adam_steps: u64,
     /// The learning rate now.
@@ -154,6 +157,7 @@ impl RunDir {
             model: t.model_name.clone(),
             progress: t.progress.clone(),
             normalizer: t.normalizer.clone(),
+            critic_normalizer: t.critic_normalizer.clone(),
             adam_steps: t.adam.t,
             learning_rate: t.adam.lr,
         };
@@ -275,7 +279,16 @@ impl RunDir {
         )?;
         Self::set_net(&mut t, &path, &tensors)?;
         Self::set_adam(&mut t, &state, &path, &tensors)?;
+        if state.critic_normalizer.as_ref().map(|n| n.mean.len())
+            != t.critic_normalizer.as_ref().map(|n| n.mean.len())
+        {
+            return Err(io(
+                &path,
+                "the critic's privileged statistics do not fit the run's critic",
+            ));
+        }
         t.normalizer = state.normalizer;
+        t.critic_normalizer = state.critic_normalizer;
         t.progress = state.progress;
         let bank = path.with_file_name("bank.json");
         if bank.is_file() {
@@ -333,12 +346,21 @@ impl RunDir {
                 t.obs_dim()
             ));
         }
+        if state.config.ppo.critic != t.config.ppo.critic {
+            return Err(format!(
+                "{}: ppo.critic is \"{}\" there, \"{}\" here (a warm start keeps the critic)",
+                self.dir.display(),
+                state.config.ppo.critic.name(),
+                t.config.ppo.critic.name()
+            ));
+        }
         let (path, tensors) = self.read_tensors()?;
         Self::set_net(t, &path, &tensors)?;
         if optimiser == WarmOptimiser::Carry {
             Self::set_adam(t, &state, &path, &tensors)?;
         }
         t.normalizer = state.normalizer;
+        t.critic_normalizer = state.critic_normalizer;
         t.progress.warm_start = Some(format!(
             "{} ({} steps, iteration {}; optimiser {})",
             self.dir.display(),

@@ -63,6 +63,21 @@ impl TrainingEnv {
         }
     }
 
+    /// Entries of [`TrainingEnv::privileged_into`] per robot (0 in a rally, which has none).
+    pub fn privileged_dim(&self) -> usize {
+        match self {
+            TrainingEnv::Single(e) => e.privileged_dim(),
+            TrainingEnv::Rally(_) => 0,
+        }
+    }
+
+    /// Appends what only a privileged critic sees (single serves; see [`Env::privileged_into`]).
+    pub fn privileged_into(&self, out: &mut Vec<f64>) {
+        if let TrainingEnv::Single(e) = self {
+            e.privileged_into(out);
+        }
+    }
+
     /// One control step with the rows of `actions` (one per robot).
     pub fn step(&mut self, actions: &[Vec<f64>]) -> Vec<AgentStep> {
         match self {

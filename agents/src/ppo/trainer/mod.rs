@@ -36,7 +36,7 @@ use super::gae::{gae, normalise, Advantages};
 use super::loss;
 use super::normalizer::RunningNormalizer;
 use super::policy::ActorCritic;
-use super::{stream_seed, Method, PpoConfig, Schedule, TrainConfig};
+use super::{stream_seed, CriticInput, Method, PpoConfig, Schedule, TrainConfig};
 use crate::controller::ControllerSpec;
 
 /// Episodes the rolling training statistics are taken over.
@@ -65,6 +65,8 @@ pub struct Trainer {
     pub adam: Adam,
     /// Observation statistics.
     pub normalizer: RunningNormalizer,
+    /// Statistics of what only the critic sees (`ppo.critic = "privileged"`; else `None`).
+    pub critic_normalizer: Option<RunningNormalizer>,
     /// Counters, statistics, curve.
     pub progress: Progress,
     /// This process's time split.
@@ -74,6 +76,8 @@ pub struct Trainer {
     slots: Vec<Slot>,
     obs_dim: usize,
     act_dim: usize,
+    /// Entries only the critic sees, after the observation (0: it sees the actor's).
+    extra_dim: usize,
     /// Robots per environment.
     agents: usize,
     model: Arc<Model>,
@@ -130,11 +134,17 @@ impl Trainer {
         config.validate()?;
         let controller = config.controller(method, &model);
         let bank = read_bank(&config)?;
-        let (_, obs_dim, act_dim) = make_env(&model, &arena, &controller, &config, bank.as_ref())?;
+        let (env, obs_dim, act_dim) =
+            make_env(&model, &arena, &controller, &config, bank.as_ref())?;
+        let extra_dim = match config.ppo.critic {
+            CriticInput::Actor => 0,
+            CriticInput::Privileged => env.privileged_dim(),
+        };
         let agents = config.env.agents();
         let p = &config.ppo;
         let net = ActorCritic::new(
             obs_dim,
+            obs_dim + extra_dim,
             act_dim,
             &p.hidden,
             p.init_std,
@@ -158,6 +168,7 @@ impl Trainer {
             net,
             adam,
             normalizer: RunningNormalizer::new(obs_dim),
+            critic_normalizer: (extra_dim > 0).then(|| RunningNormalizer::new(extra_dim)),
             progress: Progress {
                 iteration: 0,
                 env_steps: 0,
@@ -173,6 +184,7 @@ impl Trainer {
             slots,
             obs_dim,
             act_dim,
+            extra_dim,
             agents,
             config,
             model,
@@ -210,6 +222,47 @@ impl Trainer {
             s.env.observe_into(&mut out);
         }
         out
+    }
+
+    /// What only the critic sees, raw, `[envs·agents, extra]` row-major (empty when it sees the
+    /// actor's observation).
+    fn privileged(&self) -> Vec<f64> {
+        let mut out = Vec::with_capacity(self.slots.len() * self.agents * self.extra_dim);
+        if self.extra_dim > 0 {
+            for s in &self.slots {
+                s.env.privileged_into(&mut out);
+            }
+        }
+        out
+    }
+
+    /// `raw` privileged rows normalised by the critic's statistics.
+    fn normalised_extra(&self, raw: &[f64]) -> Vec<f32> {
+        let Some(norm) = &self.critic_normalizer else {
+            return Vec::new();
+        };
+        let mut out = Vec::with_capacity(raw.len());
+        for row in raw.chunks(self.extra_dim) {
+            let mut r = row.to_vec();
+            norm.apply(&mut r);
+            out.extend(r.iter().map(|&x| x as f32));
+        }
+        out
+    }
+
+    /// The critic's input for `rows` rows: each normalised observation row of `obs`, followed by
+    /// its row of `extra` when the critic is privileged.
+    fn critic_input(&self, obs: Vec<f32>, extra: &[f32], rows: usize) -> Result<Tensor, String> {
+        let (d, x) = (self.obs_dim, self.extra_dim);
+        if x == 0 {
+            return Self::tensor(obs, rows, d);
+        }
+        let mut joined = Vec::with_capacity(rows * (d + x));
+        for (o, p) in obs.chunks(d).zip(extra.chunks(x)) {
+            joined.extend_from_slice(o);
+            joined.extend_from_slice(p);
+        }
+        Self::tensor(joined, rows, d + x)
     }
 
     fn tensor(data: Vec<f32>, rows: usize, cols: usize) -> Result<Tensor, String> {
@@ -293,9 +346,10 @@ impl Trainer {
     fn advantages(&self, rollout: &Rollout) -> Result<Advantages, String> {
         let p = &self.config.ppo;
         let last_obs = self.normalised(&self.observations());
+        let last_extra = self.normalised_extra(&self.privileged());
         let last_values = self
             .net
-            .value(&Self::tensor(last_obs, p.envs * self.agents, self.obs_dim)?)
+            .value(&self.critic_input(last_obs, &last_extra, p.envs * self.agents)?)
             .and_then(|v| v.to_vec1::<f32>())
             .map_err(e)?;
         Ok(gae(
@@ -400,7 +454,17 @@ impl Trainer {
                 .collect()
         };
         let column = |v: Vec<f32>| Tensor::from_vec(v, mb, &Device::Cpu).map_err(e);
-        let obs = Self::tensor(gather(&rollout.obs, d), mb, d)?;
+        let obs_rows = gather(&rollout.obs, d);
+        let critic_obs = if self.extra_dim > 0 {
+            self.critic_input(
+                obs_rows.clone(),
+                &gather(&rollout.extra, self.extra_dim),
+                mb,
+            )?
+        } else {
+            Self::tensor(obs_rows.clone(), mb, d)?
+        };
+        let obs = Self::tensor(obs_rows, mb, d)?;
         let actions = Self::tensor(gather(&rollout.actions, a_dim), mb, a_dim)?;
         let old_means = Self::tensor(gather(&rollout.means, a_dim), mb, a_dim)?;
         let old_logp = column(gather(&rollout.logp, 1))?;
@@ -410,6 +474,7 @@ impl Trainer {
         normalise(&mut advantages);
         Ok(Minibatch {
             obs,
+            critic_obs,
             actions,
             old_means,
             old_logp,
@@ -441,7 +506,7 @@ impl Trainer {
             }
         }
         let logp = loss::log_prob(&b.actions, &mu, log_std).map_err(e)?;
-        let values = self.net.value(&b.obs).map_err(e)?;
+        let values = self.net.value(&b.critic_obs).map_err(e)?;
         let surrogate =
             loss::surrogate_loss(&logp, &b.old_logp, &b.advantages, p.clip).map_err(e)?;
         let value = loss::value_loss(&values, &b.old_values, &b.returns, p.clip).map_err(e)?;
@@ -483,6 +548,8 @@ impl Trainer {
 /// A minibatch of the rollout: its rows, what the policy and critic gave them, their targets.
 struct Minibatch {
     obs: Tensor,
+    /// What the critic reads: `obs`, or `obs` and the privileged rows.
+    critic_obs: Tensor,
     actions: Tensor,
     old_means: Tensor,
     old_logp: Tensor,

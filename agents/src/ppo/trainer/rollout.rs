@@ -49,6 +49,8 @@ struct Acted {
     logp: Vec<f32>,
     /// The critic's values.
     values: Vec<f32>,
+    /// What only the critic saw, normalised, `[rows, extra]` (empty: it sees the observation).
+    extra: Vec<f32>,
 }
 
 /// The rollout of an iteration: one row per robot and control step, step-major (every robot of
@@ -64,6 +66,8 @@ pub(super) struct Rollout {
     pub(super) logp: Vec<f32>,
     /// The critic's values.
     pub(super) values: Vec<f32>,
+    /// What only the critic saw, normalised, `[rows, extra]` (empty: it sees the observation).
+    pub(super) extra: Vec<f32>,
     /// Rewards, scaled by `reward_scale`.
     pub(super) rewards: Vec<f32>,
     /// How each step ended.
@@ -81,6 +85,7 @@ impl Rollout {
             means: Vec::with_capacity(rows * act_dim),
             logp: Vec::with_capacity(rows),
             values: Vec::with_capacity(rows),
+            extra: Vec::new(),
             rewards: Vec::with_capacity(rows),
             ends: Vec::with_capacity(rows),
             tracking: Vec::new(),
@@ -95,6 +100,7 @@ impl Rollout {
         self.means.extend(acted.means);
         self.logp.extend(acted.logp);
         self.values.extend(acted.values);
+        self.extra.extend(acted.extra);
         let mut finished = Vec::new();
         for o in outs {
             self.rewards.push(o.reward);
@@ -215,9 +221,20 @@ impl Trainer {
         let raw = self.observations();
         self.normalizer.update(&raw);
         let obs = self.normalised(&raw);
+        let raw_extra = self.privileged();
+        if let Some(norm) = self.critic_normalizer.as_mut() {
+            norm.update(&raw_extra);
+        }
+        let extra = self.normalised_extra(&raw_extra);
         let x = Self::tensor(obs.clone(), rows, d)?;
         let mean = self.net.mean(&x).map_err(e)?.detach();
-        let values = self.net.value(&x).map_err(e)?.to_vec1::<f32>().map_err(e)?;
+        let values = if self.extra_dim > 0 {
+            self.net
+                .value(&self.critic_input(obs.clone(), &extra, rows)?)
+        } else {
+            self.net.value(&x)
+        };
+        let values = values.map_err(e)?.to_vec1::<f32>().map_err(e)?;
         let means: Vec<f32> = mean.flatten_all().map_err(e)?.to_vec1().map_err(e)?;
         let actions: Vec<f32> = means
             .iter()
@@ -234,6 +251,7 @@ impl Trainer {
             means,
             logp,
             values,
+            extra,
         })
     }
 
