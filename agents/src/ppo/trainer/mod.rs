@@ -456,15 +456,13 @@ impl Trainer {
         let column = |v: Vec<f32>| Tensor::from_vec(v, mb, &Device::Cpu).map_err(e);
         let obs_rows = gather(&rollout.obs, d);
         let critic_obs = if self.extra_dim > 0 {
-            self.critic_input(
-                obs_rows.clone(),
-                &gather(&rollout.extra, self.extra_dim),
-                mb,
-            )?
+            let extra = gather(&rollout.extra, self.extra_dim);
+            Some(self.critic_input(obs_rows.clone(), &extra, mb)?)
         } else {
-            Self::tensor(obs_rows.clone(), mb, d)?
+            None
         };
         let obs = Self::tensor(obs_rows, mb, d)?;
+        let critic_obs = critic_obs.unwrap_or_else(|| obs.clone());
         let actions = Self::tensor(gather(&rollout.actions, a_dim), mb, a_dim)?;
         let old_means = Self::tensor(gather(&rollout.means, a_dim), mb, a_dim)?;
         let old_logp = column(gather(&rollout.logp, 1))?;
