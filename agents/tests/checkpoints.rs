@@ -23,6 +23,7 @@ fn kmac() -> ControllerSpec {
         gains: PdGains { kp: 40.0, kd: 3.0 },
         activation_clamp: None,
         activation_noise: None,
+        clamp_coupled: false,
     }
 }
 
@@ -120,6 +121,7 @@ fn a_kmac_checkpoint_draws_its_activation_noise_in_play_and_its_mean_action_play
             gains: PdGains { kp: 10.0, kd: 1.0 },
             activation_clamp: Some([lo, hi]),
             activation_noise: noise,
+            clamp_coupled: false,
         };
         let ck = Checkpoint::template(&m, "t", c, &[8], Activation::Tanh);
         let text = serde_json::to_string(&ck).unwrap();
@@ -233,6 +235,7 @@ fn bad_checkpoints_are_refused_naming_the_field() {
         gains: PdGains { kp: -1.0, kd: 0.0 },
         activation_clamp: None,
         activation_noise: None,
+        clamp_coupled: false,
     };
     refused(&m, &c, "controller.gains");
     for sigma in [-0.1, 1.5, 1e300] {
@@ -246,6 +249,7 @@ fn bad_checkpoints_are_refused_naming_the_field() {
             gains: PdGains { kp: 10.0, kd: 1.0 },
             activation_clamp: None,
             activation_noise: Some(sigma),
+            clamp_coupled: false,
         };
         refused(&m, &c, "controller.activation_noise");
     }

@@ -392,3 +392,52 @@ fn kmac_plays_the_mean_of_the_activation_noise_it_was_trained_with() {
     noisy.set_activation_noise(0.1, 7);
     assert_eq!(controls(&mut trained), controls(&mut noisy));
 }
+
+/// With `clamp_coupled` (the official code's form) K-MAC keeps every coupled joint's target inside
+/// its range where the coupling's polynomial leaves it, and changes nothing else; without it the
+/// polynomial's value stands (the checkpoints trained before the setting).
+#[test]
+fn kmac_clamps_coupled_targets_to_their_ranges_when_asked() {
+    let mut m = sim::config::default_model();
+    // The default robot's spine couplings stay in range; steepened three times they leave it.
+    for c in &mut m.couplings {
+        for k in &mut c.coef[1..] {
+            *k *= 3.0;
+        }
+    }
+    let m = Arc::new(m);
+    let mut robot = Robot::new(m.clone(), &ArenaConfig::default().grip, sim::Side::A).unwrap();
+    robot.reset(Some(&ready(&m)));
+    let space = ActionSpace::new(&m);
+    let gains = PdGains { kp: 10.0, kd: 1.0 };
+    for end in [0, 1] {
+        let targets: Vec<f64> = space
+            .joints
+            .iter()
+            .map(|&j| m.joints[j].range.map_or(0.0, |r| r[end]))
+            .collect();
+        let open = Kmac::new(&m, gains)
+            .target_configuration(&m, &robot.state, &targets)
+            .to_vec();
+        let clamped = Kmac::new(&m, gains)
+            .with_clamp_coupled(true)
+            .target_configuration(&m, &robot.state, &targets)
+            .to_vec();
+        let mut outside = 0;
+        for (i, (a, b)) in open.iter().zip(&clamped).enumerate() {
+            let coupled = m
+                .couplings
+                .iter()
+                .find(|c| m.joints[c.dependent].qpos_adr == i);
+            match coupled.and_then(|c| m.joints[c.dependent].range) {
+                Some([lo, hi]) => {
+                    assert!(lo <= *b && *b <= hi, "qpos {i}: {b} outside [{lo}, {hi}]");
+                    assert_eq!(*b, a.clamp(lo, hi));
+                    outside += usize::from(*a < lo || *a > hi);
+                }
+                None => assert_eq!(a.to_bits(), b.to_bits(), "qpos {i}"),
+            }
+        }
+        assert!(outside > 0, "no coupled target left its range at end {end}");
+    }
+}

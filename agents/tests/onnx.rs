@@ -22,6 +22,7 @@ fn onnx_checkpoint(blocks: Vec<ObsBlock>, n: usize, bytes: &[u8]) -> Checkpoint 
             gains: PdGains { kp: 40.0, kd: 3.0 },
             activation_clamp: None,
             activation_noise: None,
+            clamp_coupled: false,
         },
         observation: ObservationSpec {
             blocks,
@@ -206,6 +207,7 @@ fn a_network_whose_output_is_not_finite_in_play_forfeits_instead_of_panicking() 
         gains: PdGains { kp: 10.0, kd: 1.0 },
         activation_clamp: None,
         activation_noise: None,
+        clamp_coupled: false,
     };
     let mut ck = Checkpoint::template(&m, "overflow", kmac, &[8], Activation::Relu);
     for layer in &mut ck.policy.as_mut().unwrap().layers {

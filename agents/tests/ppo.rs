@@ -604,6 +604,52 @@ fn the_task_rules_setting_reaches_both_training_environments() {
 }
 
 #[test]
+fn the_official_position_target_and_coupled_clamp_reach_the_environments_and_the_checkpoint() {
+    use agents::controller::ControllerSpec;
+    use agents::env::PositionTarget;
+    use agents::ppo::trainer::envs::{make_env, TrainingEnv};
+    let m = model();
+    let arena = sim::config::ArenaConfig::default();
+    let default = TrainConfig::default();
+    assert_eq!(default.position_target, PositionTarget::Strike);
+    assert!(!default.controller.kmac_clamp_coupled);
+    for env in ["single", "rally"] {
+        let text = format!(
+            "env = \"{env}\"\nposition_target = \"contact\"\n[controller]\nkmac_clamp_coupled = true\n"
+        );
+        let c: TrainConfig = toml::from_str(&text).expect("parses");
+        let controller = c.controller(Method::Kmac, &m);
+        let aim = match make_env(&m, &arena, &controller, &c, None)
+            .expect("builds")
+            .0
+        {
+            TrainingEnv::Single(e) => e.position_target,
+            TrainingEnv::Rally(e) => e.position_target,
+        };
+        assert_eq!(aim, PositionTarget::Contact, "{env}");
+        // The checkpoint records the clamp; one without it (every checkpoint before the setting)
+        // serialises without the field and reads back without the clamp.
+        let on = serde_json::to_value(&controller).unwrap();
+        assert_eq!(on["clamp_coupled"], serde_json::Value::Bool(true));
+        let off = serde_json::to_value(default.controller(Method::Kmac, &m)).unwrap();
+        assert!(off.get("clamp_coupled").is_none(), "{off}");
+        let back: ControllerSpec = serde_json::from_value(off).unwrap();
+        assert!(matches!(
+            back,
+            ControllerSpec::Kmac {
+                clamp_coupled: false,
+                ..
+            }
+        ));
+    }
+    let bad = toml::from_str::<TrainConfig>("position_target = \"centre\"").unwrap_err();
+    assert!(
+        bad.to_string().contains("strike") && bad.to_string().contains("contact"),
+        "{bad}"
+    );
+}
+
+#[test]
 fn a_privileged_critic_sees_what_the_policy_does_not_and_only_the_critic_does() {
     let m = model();
     let mut cfg = small(4, 8, 2);

@@ -24,6 +24,7 @@ fn players_plan_with_the_bounce_of_the_arena_preset() {
             gains: PdGains { kp: 10.0, kd: 1.0 },
             activation_clamp: None,
             activation_noise: None,
+            clamp_coupled: false,
         },
         &[],
         Activation::Linear,

@@ -192,6 +192,7 @@ fn a_checkpoint_that_trained_with_it_plays_it() {
         gains: agents::controller::PdGains { kp: 10.0, kd: 1.0 },
         activation_clamp: None,
         activation_noise: None,
+        clamp_coupled: false,
     };
     let commands = |replan: Replan| {
         let mut ck = Checkpoint::template(

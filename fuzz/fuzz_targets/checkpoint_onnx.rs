@@ -27,6 +27,7 @@ fuzz_target!(|data: &[u8]| {
             gains: PdGains { kp: 10.0, kd: 1.0 },
             activation_clamp: None,
             activation_noise: None,
+            clamp_coupled: false,
         },
         observation: ObservationSpec {
             blocks: ObsBlock::ALL.to_vec(),

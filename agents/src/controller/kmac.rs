@@ -94,6 +94,11 @@ pub struct Kmac {
     /// noiseless one: the mean control of training, only a first-order match of its activations,
     /// whose dynamics rise faster than they fall); ignored while the noise is drawn.
     pub expected_activation_noise: Option<f64>,
+    /// The official code's form: a coupled joint's target, its equality's polynomial of the
+    /// independent joint's target, is clamped to the coupled joint's range (on MyoSuite's robot the
+    /// lumbar flexion couplings leave their ranges over 12–31% of the flexion range); `false`: the
+    /// polynomial's value as it is (the checkpoints trained before the setting).
+    pub clamp_coupled: bool,
     target: MuscleGeometry,
     current: MuscleGeometry,
     qpos_target: Vec<f64>,
@@ -108,6 +113,7 @@ impl Kmac {
             activation_clamp: None,
             activation_noise: None,
             expected_activation_noise: None,
+            clamp_coupled: false,
             target: MuscleGeometry::new(model),
             current: MuscleGeometry::new(model),
             qpos_target: model.qpos0.clone(),
@@ -117,6 +123,12 @@ impl Kmac {
     /// K-MAC in the official code's form when `clamp` is given (see [`Kmac::activation_clamp`]).
     pub fn with_activation_clamp(mut self, clamp: Option<[f64; 2]>) -> Kmac {
         self.activation_clamp = clamp;
+        self
+    }
+
+    /// Clamps coupled joints' targets to their ranges when `clamp` (see [`Kmac::clamp_coupled`]).
+    pub fn with_clamp_coupled(mut self, clamp: bool) -> Kmac {
+        self.clamp_coupled = clamp;
         self
     }
 
@@ -132,6 +144,32 @@ impl Kmac {
         self.activation_noise = (sigma > 0.0).then(|| (sigma, sim::rng::Rng::seeded(seed)));
     }
 
+    /// The full target configuration K-MAC's lengths come from: `state`'s positions with the
+    /// targets of `space.joints` set, the couplings applied (each coupled joint's target clamped to
+    /// its range when [`Kmac::clamp_coupled`]).
+    pub fn target_configuration(
+        &mut self,
+        model: &Model,
+        state: &State,
+        targets: &[f64],
+    ) -> &[f64] {
+        self.qpos_target.copy_from_slice(&state.qpos);
+        for (&j, &z) in self.space.joints.iter().zip(targets) {
+            self.qpos_target[model.joints[j].qpos_adr] = z;
+        }
+        model.apply_couplings(&mut self.qpos_target);
+        if self.clamp_coupled {
+            for c in &model.couplings {
+                let joint = &model.joints[c.dependent];
+                if let Some([lo, hi]) = joint.range {
+                    let q = &mut self.qpos_target[joint.qpos_adr];
+                    *q = q.clamp(lo, hi);
+                }
+            }
+        }
+        &self.qpos_target
+    }
+
     /// Writes controls for every actuator into `ctrl`, given target positions of `space.joints`.
     pub fn controls(
         &mut self,
@@ -142,11 +180,7 @@ impl Kmac {
         ctrl: &mut [f64],
     ) {
         // 1. The full target configuration (couplings applied) and its muscle lengths.
-        self.qpos_target.copy_from_slice(&state.qpos);
-        for (&j, &z) in self.space.joints.iter().zip(targets) {
-            self.qpos_target[model.joints[j].qpos_adr] = z;
-        }
-        model.apply_couplings(&mut self.qpos_target);
+        self.target_configuration(model, state, targets);
         self.target.update_lengths(model, &self.qpos_target);
         self.current.update(model, &state.qpos);
         // 2–5 per muscle.

@@ -182,6 +182,10 @@ pub enum ControllerSpec {
         /// the controls as computed.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         activation_noise: Option<f64>,
+        /// The official code's form: coupled joints' targets clamped to their ranges (see
+        /// [`Kmac::clamp_coupled`]); absent: `false`, the checkpoints trained before the setting.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        clamp_coupled: bool,
     },
     /// Muscle-PD.
     MusclePd {
@@ -297,9 +301,11 @@ impl ActionMapper {
                 gains,
                 activation_clamp,
                 activation_noise,
+                clamp_coupled,
             } => ActionMapper::Kmac(Box::new(
                 Kmac::new(model, *gains)
                     .with_activation_clamp(*activation_clamp)
+                    .with_clamp_coupled(*clamp_coupled)
                     .with_expected_activation_noise(*activation_noise),
             )),
             ControllerSpec::MusclePd { gains } => {

@@ -46,6 +46,8 @@ pub struct RallyEnv {
     pub weights: RewardWeights,
     /// The rules the task terms judge a return by (training: `task_rules`).
     pub task_rules: TaskRules,
+    /// Where the position term aims the blade (training: `position_target`).
+    pub position_target: PositionTarget,
     /// Least control of the grip muscles (see [`apply_grip_floor`]).
     pub grip_floor: f64,
     seats: [Seat; 2],
@@ -94,6 +96,7 @@ impl RallyEnv {
             rally,
             weights,
             task_rules: TaskRules::Ours,
+            position_target: PositionTarget::Strike,
             grip_floor: 0.0,
             seats: [seat(Side::A), seat(Side::B)],
             bounce,
@@ -220,7 +223,10 @@ impl RallyEnv {
                 contact,
                 plan.as_ref(),
                 &self.bounce,
-                self.task_rules,
+                StrokeRules {
+                    task: self.task_rules,
+                    aim: self.position_target,
+                },
             );
             if plan.is_none() && !seat.stroke.in_progress() {
                 let d = (robot.paddle.pose.pos - seat.ready).norm();

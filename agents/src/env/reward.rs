@@ -256,11 +256,49 @@ pub fn mean_activation(robot: &Robot) -> f64 {
     sum / n.max(1) as f64
 }
 
-/// Dense pose terms against the plan: `exp(−8·d)` of the blade centre's distance to the strike point,
-/// `exp(−2·θ)` of the angle between the blade normal (either face) and the planned normal.
-pub fn pose_terms(blade: &V3, normal: &V3, plan: &Plan) -> (f64, f64) {
+/// Where the position term wants the blade's centre at the strike time (`position_target` of a
+/// training configuration).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PositionTarget {
+    /// Ours: at the strike point, the ball's centre (which the blade cannot reach: it meets the
+    /// ball one ball radius and half a blade's thickness before).
+    #[default]
+    Strike,
+    /// The official code's: where the blade's centre is when its face first touches the ball
+    /// there: the strike point moved back along the planned racket velocity by
+    /// [`contact_offset`] (0.04 m on both robots' paddles, the official code's constant).
+    Contact,
+}
+
+/// How far before the strike point the blade's centre is when its face touches the ball there: the
+/// ball's radius plus half the blade's thickness, m.
+pub fn contact_offset(shape: &sim::geometry::PaddleShape) -> f64 {
+    sim::arena::BALL_RADIUS + shape.blade.half_length
+}
+
+/// The point the position term measures the blade's centre against (see [`PositionTarget`]).
+pub fn position_target(plan: &Plan, target: PositionTarget, offset: f64) -> V3 {
+    match target {
+        PositionTarget::Strike => plan.strike_pos,
+        PositionTarget::Contact => {
+            let v = plan.racket_vel;
+            let n = v.norm();
+            if n > 1e-9 {
+                plan.strike_pos - v * (offset / n)
+            } else {
+                plan.strike_pos
+            }
+        }
+    }
+}
+
+/// Dense pose terms against the plan: `exp(−8·d)` of the blade centre's distance to `target` (see
+/// [`position_target`]), `exp(−2·θ)` of the angle between the blade normal (either face) and the
+/// planned normal.
+pub fn pose_terms(blade: &V3, normal: &V3, target: &V3, plan: &Plan) -> (f64, f64) {
     let u: V3 = plan.racket_quat * V3::z();
-    let d = (blade - plan.strike_pos).norm();
+    let d = (blade - target).norm();
     let theta = sim::math::acos(normal.dot(&u).abs().min(1.0));
     (sim::math::exp(-8.0 * d), sim::math::exp(-2.0 * theta))
 }
@@ -340,6 +378,16 @@ pub fn blade(robot: &Robot) -> (V3, V3) {
     (p.to_world(&robot.shape.blade.center), rot * V3::z())
 }
 
+/// What a training configuration sets of how a stroke is rewarded: the task terms' rules and where
+/// the position term aims.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StrokeRules {
+    /// `task_rules`.
+    pub task: TaskRules,
+    /// `position_target`.
+    pub aim: PositionTarget,
+}
+
 /// The reward of one incoming ball, step by step: dense pose terms against the plan (in full once
 /// the ball was touched), the velocity term at contact, and the task terms once, `TASK_DELAY_STEPS`
 /// after the ball left the paddle.
@@ -371,8 +419,9 @@ impl StrokeReward {
         contact: bool,
         plan: Option<&Plan>,
         bounce: &BounceModel,
-        rules: TaskRules,
+        rules: StrokeRules,
     ) -> (RewardTerms, bool) {
+        let StrokeRules { task: rules, aim } = rules;
         let mut terms = RewardTerms {
             grasp: grasp_term(robot),
             effort: mean_activation(robot),
@@ -392,7 +441,8 @@ impl StrokeReward {
             terms.orientation = 1.0;
         } else if let Some(plan) = plan {
             let (c, n) = blade(robot);
-            (terms.position, terms.orientation) = pose_terms(&c, &n, plan);
+            let target = position_target(plan, aim, contact_offset(&robot.shape));
+            (terms.position, terms.orientation) = pose_terms(&c, &n, &target, plan);
         }
         if contact {
             if let Some(plan) = plan {
@@ -426,6 +476,46 @@ impl StrokeReward {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn plan_towards(racket_vel: V3) -> Plan {
+        Plan {
+            receiver: Side::A,
+            t_strike: 0.3,
+            strike_pos: V3::new(1.8, 0.1, 1.2),
+            strike_vel: V3::new(4.0, 0.0, -1.0),
+            v_out: V3::new(-4.0, 0.0, 1.0),
+            racket_vel,
+            racket_quat: UnitQuaternion::rotation_between(&V3::z(), &(-racket_vel)).unwrap(),
+            accepted: true,
+        }
+    }
+
+    #[test]
+    fn the_contact_target_lies_where_the_blade_first_touches_the_ball_at_the_strike_point() {
+        let plan = plan_towards(V3::new(-3.0, 0.0, 4.0));
+        let offset = contact_offset(&sim::geometry::PaddleShape::standard());
+        assert_eq!(offset, 0.04);
+        assert_eq!(
+            position_target(&plan, PositionTarget::Strike, offset),
+            plan.strike_pos
+        );
+        let at = position_target(&plan, PositionTarget::Contact, offset);
+        // Moved back against the racket's velocity (−3, 0, 4)/5 by 0.04 m.
+        let expected = plan.strike_pos - V3::new(-0.6, 0.0, 0.8) * 0.04;
+        assert!((at - expected).norm() < 1e-15, "{at:?}");
+        let normal = plan.racket_quat * V3::z();
+        let (p, o) = pose_terms(&at, &normal, &at, &plan);
+        assert_eq!(p, 1.0);
+        assert!(o > 1.0 - 1e-6, "{o}");
+        let (p, _) = pose_terms(&at, &normal, &plan.strike_pos, &plan);
+        assert!((p - sim::math::exp(-8.0 * 0.04)).abs() < 1e-12);
+        // A plan without a racket velocity has no direction to step back along.
+        let still = plan_towards(V3::zeros());
+        assert_eq!(
+            position_target(&still, PositionTarget::Contact, offset),
+            still.strike_pos
+        );
+    }
 
     #[test]
     fn the_weighted_terms_are_named_as_the_configuration_names_them_and_add_up_to_the_reward() {

@@ -71,6 +71,8 @@ pub struct Env {
     pub weights: RewardWeights,
     /// The rules the task terms judge a return by (training: `task_rules`).
     pub task_rules: TaskRules,
+    /// Where the position term aims the blade (training: `position_target`).
+    pub position_target: PositionTarget,
     /// Serve distribution.
     pub kind: sim::serve::ServeKind,
     /// When an episode ends.
@@ -110,6 +112,7 @@ impl Env {
             episode,
             weights,
             task_rules: TaskRules::Ours,
+            position_target: PositionTarget::Strike,
             kind,
             end: EpisodeEnd::Rules,
             grip_floor: 0.0,
@@ -249,7 +252,10 @@ impl Env {
             contact,
             plan.as_ref(),
             &self.bounce,
-            self.task_rules,
+            StrokeRules {
+                task: self.task_rules,
+                aim: self.position_target,
+            },
         );
         if judged {
             self.predicted_success = self.stroke.legal;

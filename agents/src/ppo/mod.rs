@@ -335,6 +335,10 @@ pub struct ControllerConfig {
     /// bounds (official [σ(−7.5), σ(2.5)]); absent: ours (the activation dynamics inverted).
     #[serde(default)]
     pub kmac_activation_clamp: Option<[f64; 2]>,
+    /// K-MAC clamps coupled joints' targets to their ranges (the official code; off by default,
+    /// as every checkpoint trained before the setting).
+    #[serde(default)]
+    pub kmac_clamp_coupled: bool,
     /// Training noise, σ, on the policy's actions (in [−1, 1] units, every method; official 0.05).
     #[serde(default)]
     pub action_noise: f64,
@@ -352,6 +356,7 @@ impl Default for ControllerConfig {
             dynsyn_seed: 1,
             grip_floor: 0.1,
             kmac_activation_clamp: None,
+            kmac_clamp_coupled: false,
             action_noise: 0.0,
             activation_noise: 0.0,
         }
@@ -421,6 +426,10 @@ pub struct TrainConfig {
     /// The rules the task terms judge a return by: ours (the default) or the official code's
     /// margins (see [`crate::env::TaskRules`]).
     pub task_rules: crate::env::TaskRules,
+    /// Where the position term aims the blade's centre: `strike` (ours, the default: at the strike
+    /// point) or `contact` (the official code's: where it touches the ball there; see
+    /// [`crate::env::PositionTarget`]).
+    pub position_target: crate::env::PositionTarget,
     /// How often the planner's command is made for one ball: `once` (ours, the default) or
     /// `after_bounce`, once more from the ball's real state after its bounce (the official code's
     /// second plan; see [`crate::observation::Replan`]). The checkpoint records it.
@@ -479,6 +488,7 @@ impl TrainConfig {
                 activation_clamp: self.controller.kmac_activation_clamp,
                 activation_noise: (self.controller.activation_noise > 0.0)
                     .then_some(self.controller.activation_noise),
+                clamp_coupled: self.controller.kmac_clamp_coupled,
             },
             Method::Muscle => ControllerSpec::Direct,
             Method::MusclePd => ControllerSpec::MusclePd {

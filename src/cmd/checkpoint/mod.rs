@@ -228,6 +228,7 @@ fn template(
             gains: PdGains { kp: 40.0, kd: 3.0 },
             activation_clamp: None,
             activation_noise: None,
+            clamp_coupled: false,
         },
         "muscle_pd" => ControllerSpec::MusclePd {
             gains: PdGains::MUSCLE_PD,

@@ -165,6 +165,7 @@ pub fn make_env(
             env.end = EpisodeEnd::Training;
             env.grip_floor = grip_floor;
             env.task_rules = config.task_rules;
+            env.position_target = config.position_target;
             env.observer.set_replan(config.replan);
             env.noise = crate::env::TrainingNoise {
                 action: config.controller.action_noise,
@@ -185,6 +186,7 @@ pub fn make_env(
             )?;
             env.grip_floor = grip_floor;
             env.task_rules = config.task_rules;
+            env.position_target = config.position_target;
             env.set_replan(config.replan);
             let (o, a) = (env.obs_dim(), env.action_dim());
             (TrainingEnv::Rally(Box::new(env)), o, a)
