@@ -28,7 +28,34 @@ impl Drop for Server {
     }
 }
 
-pub fn tempdir(tag: &str) -> PathBuf {
+/// A test's directory under the system's temporary directory (its store, its server's log, the files it
+/// sends): removed when the test passes, kept when it fails, for a look at what the server wrote.
+pub struct TestDir(PathBuf);
+
+impl std::ops::Deref for TestDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TestDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TestDir {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            eprintln!("the failed test's directory is kept: {}", self.0.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+pub fn tempdir(tag: &str) -> TestDir {
     let d = std::env::temp_dir().join(format!("rally-server-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
@@ -51,7 +78,7 @@ pub fn tempdir(tag: &str) -> PathBuf {
             .unwrap_or_else(|e| panic!("a PostgreSQL database for {tag} on {admin}: {e}"));
         std::fs::write(d.join("db.url"), url).unwrap();
     }
-    d
+    TestDir(d)
 }
 
 /// The PostgreSQL admin URL the tests run on (`RALLY_TEST_POSTGRES`), if any.
