@@ -237,7 +237,7 @@ fn validate(out: &Outputs, t: &mut Trainer, bar: &ProgressBar) -> Result<(), Cli
 
 /// Runs `rally train`.
 pub fn run(args: &TrainArgs) -> Result<(), CliError> {
-    agents::ppo::fix_matmul_threads();
+    agents::ppo::tune_candle_threads();
     let body = args.model.load()?;
     let config = configuration(args)?;
     let dir = RunDir::open(&args.out).map_err(|e| CliError::Usage(format!("--out: {e}")))?;

@@ -219,7 +219,7 @@ pub fn train_rates(
 ) -> anyhow::Result<serde_json::Value> {
     use agents::ppo::trainer::Trainer;
     use agents::ppo::{Method, TrainConfig};
-    agents::ppo::fix_matmul_threads();
+    agents::ppo::tune_candle_threads();
     let config = TrainConfig::default();
     let envs = config.ppo.envs;
     let mut t = Trainer::on(
