@@ -33,11 +33,11 @@ const SPIN_LIMIT: &str = "CANDLE_BARRIER_POOL_SPIN_LIMIT";
 ///   same threads as before, without the reads.
 /// - Element-wise operations on large tensors (the update's hidden layers: 512 × 128 values) run on a
 ///   pool of candle's own whose threads, after each operation, spin 25 000 times before they sleep:
-///   during an update they spin most of the time, on cores the products' threads need (8% of a
-///   training run's samples on 2 cores). Unless the user set `CANDLE_BARRIER_POOL_SPIN_LIMIT`, they
-///   spin 200 times. A run trains the same weights either way (each element is computed alone); on
-///   a 2-core machine that also ran another training, an iteration of MyoSuite's robot took 10–15%
-///   less time.
+///   during an update they spin most of the time (8% of a training run's samples on 2 cores). Unless
+///   the user set `CANDLE_BARRIER_POOL_SPIN_LIMIT`, they spin 200 times. A run trains the same
+///   weights either way (each element is computed alone). On an idle 2-core machine it made no
+///   measurable difference; on one that also ran another training, the spinning took cores the
+///   other work needed, and an iteration of MyoSuite's robot took 10–15% less time without it.
 ///
 /// Changes the process's environment: call it at the start of a command, before other threads are
 /// started (the `rally train` and `rally bench train` commands do; library code and tests do not).
