@@ -23,9 +23,9 @@ enum Command {
     Ball(Box<cmd::ball::BallArgs>),
     /// Submit a plan of matches and tournaments to a server, follow them, summarise, write CSV.
     Batch(cmd::batch::BatchArgs),
-    /// Measure simulator speed against MuJoCo on the same work.
+    /// Measure speed: the physics against MuJoCo on the same work, agents, training, the server.
     Bench(cmd::bench::BenchArgs),
-    /// Write a template policy checkpoint, or validate one.
+    /// Policy checkpoints: template, built-in, observation/action spec, from ONNX, validate, scale noise.
     Checkpoint(cmd::checkpoint::CheckpointArgs),
     /// Evaluate an agent on seeded single-serve episodes: hit and success rates, effort.
     Eval(cmd::eval::EvalArgs),
@@ -39,7 +39,7 @@ enum Command {
     Plot(cmd::plot::PlotArgs),
     /// Evaluate the committed checkpoints of the four methods: the paper's Table I, as markdown.
     Reproduce(cmd::reproduce::ReproduceArgs),
-    /// Run the tournament server: REST API, match workers, leaderboard page, SQLite storage.
+    /// Run the tournament server: REST API, match workers, leaderboard page, SQLite or PostgreSQL.
     Serve(cmd::serve::ServeArgs),
     /// Train a policy with PPO (Diff-Muscle or a baseline), resumable, with learning curves.
     Train(cmd::train::TrainArgs),

@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 fn rally(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rally"))
         .args(args)
+        .env_remove("RALLY_FONT")
         .output()
         .expect("rally runs")
 }
@@ -129,6 +130,21 @@ fn a_run_killed_with_sigkill_resumes_as_the_same_run() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+    // The font is built in; RALLY_FONT replaces it, and a file that is not a font is named.
+    let bad_png = base.join("bad-font.png");
+    let out = Command::new(env!("CARGO_BIN_EXE_rally"))
+        .args(["plot", straight.to_str().unwrap(), "--out"])
+        .arg(&bad_png)
+        .env("RALLY_FONT", killed.join("curve.csv"))
+        .output()
+        .expect("rally runs");
+    assert_ne!(out.status.code(), Some(0));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("RALLY_FONT=") && err.contains("curve.csv"),
+        "{err}"
+    );
+    assert!(!bad_png.exists());
     // A second start without --resume refuses to overwrite the run.
     let out = rally(&train_args(steps, "4", cfg, &straight, &[]));
     assert_eq!(out.status.code(), Some(2));

@@ -1,6 +1,7 @@
 //! `rally plot`: learning curves of one or more training runs (reward, hit rate and success rate
-//! against control steps, one line per run) as a PNG, drawn with plotters. Text needs a TrueType
-//! font: the first of `FONT_PATHS` that exists (Debian's fonts-dejavu-core), or `RALLY_FONT`.
+//! against control steps, one line per run) as a PNG, drawn with plotters. Text is set in DejaVu
+//! Sans 2.37, built into the binary (the `dejavu` crate), so a figure comes out the same on every
+//! machine and needs no system font; `RALLY_FONT` names another TrueType file.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -13,13 +14,6 @@ use plotters::prelude::*;
 
 use super::CliError;
 
-/// Where a sans-serif TrueType font is looked for.
-pub const FONT_PATHS: [&str; 3] = [
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/TTF/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-];
-
 /// One run's curve and its legend label.
 pub struct Series {
     /// Legend label.
@@ -28,28 +22,25 @@ pub struct Series {
     pub rows: Vec<CurveRow>,
 }
 
-/// Registers the font once; the error says where it looked.
+/// Registers the font once: `RALLY_FONT`'s file if set, else the built-in DejaVu Sans. The
+/// error names the file.
 fn font() -> Result<(), String> {
     static DONE: OnceLock<Result<(), String>> = OnceLock::new();
     DONE.get_or_init(|| {
-        let env = std::env::var("RALLY_FONT").ok();
-        let candidates: Vec<String> = env
-            .into_iter()
-            .chain(FONT_PATHS.iter().map(|s| s.to_string()))
-            .collect();
-        let path = candidates
-            .iter()
-            .find(|p| Path::new(p).is_file())
-            .ok_or_else(|| {
-                format!(
-                    "no TrueType font at {} (install fonts-dejavu-core, or set RALLY_FONT)",
-                    candidates.join(", ")
+        let (bytes, from): (&'static [u8], String) = match std::env::var_os("RALLY_FONT") {
+            Some(path) => {
+                let path = PathBuf::from(path);
+                let bytes = std::fs::read(&path)
+                    .map_err(|e| format!("RALLY_FONT={}: {e}", path.display()))?;
+                (
+                    Box::leak(bytes.into_boxed_slice()),
+                    format!("RALLY_FONT={}", path.display()),
                 )
-            })?;
-        let bytes = std::fs::read(path).map_err(|e| format!("{path}: {e}"))?;
-        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+            }
+            None => (dejavu::sans::regular(), "the built-in DejaVu Sans".into()),
+        };
         plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
-            .map_err(|_| format!("{path}: not a usable TrueType font"))
+            .map_err(|_| format!("{from}: not a usable TrueType font"))
     })
     .clone()
 }
@@ -463,10 +454,12 @@ pub fn return_distribution(panels: &[Crossings], out: &Path) -> Result<(), Strin
 /// Arguments of `rally plot`.
 #[derive(Args, Debug)]
 #[command(
-    after_help = "Example:\n  rally plot runs/kmac runs/muscle runs/muscle-pd runs/dynsyn --out docs/curves.png"
+    after_help = "Example:\n  rally plot runs/kmac runs/muscle runs/muscle-pd runs/dynsyn --out docs/curves.png\n\n\
+                  Text is set in DejaVu Sans, built in; RALLY_FONT=FILE sets it in another TrueType font."
 )]
 pub struct PlotArgs {
-    /// Training run directories (each with a curve.csv) or curve.csv files; one line per run.
+    /// Training run directories (each with a curve.csv) or curve CSV files, one line each: labelled
+    /// by the directory, and by the file's name too when it is not curve.csv.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
     /// The PNG to write.
@@ -484,14 +477,21 @@ pub fn run(args: &PlotArgs) -> Result<(), CliError> {
             r.clone()
         };
         let rows = read_curve(&csv).map_err(CliError::Usage)?;
-        let label = if r.is_dir() {
-            r
+        // A run directory, or a file named curve.csv, is labelled by the run's directory; another
+        // CSV by its directory and name (two curves of one directory must not share a label).
+        let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().to_string());
+        let dir = if r.is_dir() {
+            Some(r.as_path())
         } else {
-            r.parent().unwrap_or(r)
-        }
-        .file_name()
-        .map(|n| n.to_string_lossy().to_string())
-        .unwrap_or_else(|| csv.display().to_string());
+            r.parent()
+        };
+        let run = dir.and_then(name);
+        let stem = csv.file_stem().map(|s| s.to_string_lossy().to_string());
+        let label = match (run, stem) {
+            (Some(run), Some(stem)) if !r.is_dir() && stem != "curve" => format!("{run}/{stem}"),
+            (Some(run), _) => run,
+            (None, _) => csv.display().to_string(),
+        };
         series.push(Series { label, rows });
     }
     learning_curves(&series, &args.out).map_err(|e| CliError::Failed(anyhow!(e)))?;

@@ -14,10 +14,11 @@ use super::CliError;
     after_help = "Settings are config/default.toml's (built into the binary: the same from any directory) with\n\
                   what a --config file changes laid over them (it names only those). --addr, --db, --workers and\n\
                   --no-continuous override them, and RALLY_ADMIN_TOKEN the admin_token. The store is DATA/rally.db\n\
-                  unless --db or the file names another (DATA: $RALLY_DATA_DIR, else ~/.local/share/muscle-rally).\n\
-                  Logs go to stderr (RUST_LOG=debug for more).\n\n\
-                  On first start the built-in scripted agents are registered and, unless continuous mode is off,\n\
-                  matches between them start at once: open the printed address to watch the leaderboard fill.\n\n\
+                  unless --db or the file names another (DATA: $RALLY_DATA_DIR, else the platform's data directory,\n\
+                  on Linux ~/.local/share/muscle-rally). Logs go to stderr (RUST_LOG=debug for more).\n\n\
+                  On first start the built-in agents (scripted and trained) are registered and, unless continuous\n\
+                  mode is off, matches between them start at once: open the printed address to watch the\n\
+                  leaderboard fill.\n\n\
                   Example:\n  RALLY_ADMIN_TOKEN=secret rally serve --addr 127.0.0.1:8080 --db data/rally.db\n  \
                   rally serve --db postgres://rally:secret@db.lab:5432/rally --workers 0"
 )]
