@@ -1,7 +1,7 @@
 //! `rally plot`: learning curves of one or more training runs (reward, hit rate and success rate
 //! against control steps, one line per run) as a PNG, drawn with plotters. Text is set in DejaVu
-//! Sans 2.37, built into the binary (the `dejavu` crate), so a figure comes out the same on every
-//! machine and needs no system font; `RALLY_FONT` names another TrueType file.
+//! Sans 2.37, built into the binary (the `dejavu` crate), so a figure needs no system font;
+//! `RALLY_FONT` names another TrueType file.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
