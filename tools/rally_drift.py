@@ -5,9 +5,11 @@ Reads a replay written by `rally match A B --replay FILE` (MyoSuite's robot: `--
 and, for every rally whose first return bounced on the server's half of the table, reports how
 close the server's paddle got to the ball on that side, and where the server's pelvis slides
 (`qpos[0]` = pelvis_x, `qpos[1]` = pelvis_y) were at that moment. A robot that stands ready meets
-the ball (closest approach of a few centimetres); one that wandered off while the ball was away
-misses it by far. The server is the side the ball starts on (the rally serve leaves from the
-server's hitting plane); a return is the first reversal of the ball's direction along the table.
+the ball (a closest approach of about the blade's size, ~0.1 m); one that wandered off while the
+ball was away misses it by far. The server is the side the ball starts on (the rally serve leaves from the
+server's hitting plane); the receiver's touch is taken as the first reversal of the ball's motion
+along the table on the receiver's half. Distances are from the ball's centre to the paddle's, both
+taken as moving linearly between the replay's 50 Hz frames.
 
 Usage: tools/rally_drift.py REPLAY.json [--near 0.15]
 e.g.   target/release/rally match CKPT CKPT --model myochallenge --rallies 40 --seed 4242 --replay r.json
@@ -20,35 +22,69 @@ import math
 import statistics
 import sys
 
-# Half the table's length along x (m): the arena's table is 2.74 m long, centred on x = 0.
+# The arena's table (m): x in [-1.37, 1.37], y in 0.04 +- 0.76, its top at z = 0.795 (sim/src/arena.rs).
 TABLE_HALF_LENGTH = 1.37
+TABLE_CENTER_Y = 0.04
+TABLE_HALF_WIDTH = 0.76
+TABLE_TOP = 0.795
+# Slack on a bounce's sampled position: at 50 Hz a ball moves ~0.1 m between frames.
+SLACK = 0.12
+
+
+def closest(f0, f1, side):
+    """Least ball-to-paddle-centre distance between two frames, both moving linearly in between."""
+    p0 = [b - p for b, p in zip(f0["ball"], f0["paddle_" + side][:3])]
+    p1 = [b - p for b, p in zip(f1["ball"], f1["paddle_" + side][:3])]
+    d = [b - a for a, b in zip(p0, p1)]
+    dd = sum(x * x for x in d)
+    s = 0.0 if dd == 0.0 else min(1.0, max(0.0, -sum(a * b for a, b in zip(p0, d)) / dd))
+    return math.sqrt(sum((a + s * b) ** 2 for a, b in zip(p0, d)))
 
 
 def server_drift(frames):
-    """(closest approach in m, pelvis x, pelvis y) of the server, or None when no ball came back."""
+    """(closest approach in m, pelvis x, pelvis y) of the server, or None when no return bounced
+    on its half."""
     xs = [f["ball"][0] for f in frames]
     side = "a" if xs[0] > 0 else "b"
     sign = 1.0 if side == "a" else -1.0
-    # The first reversal of the ball's motion along x: the receiver's touch.
+    # The receiver's touch, taken as the first reversal of the ball's motion along x on the
+    # receiver's half.
     turn = next(
-        (i for i in range(1, len(xs) - 1) if (xs[i] - xs[i - 1]) * (xs[i + 1] - xs[i]) < 0),
+        (
+            i
+            for i in range(1, len(xs) - 1)
+            if (xs[i] - xs[i - 1]) * (xs[i + 1] - xs[i]) < 0 and sign * xs[i] < 0
+        ),
         None,
     )
     if turn is None:
         return None
-    back = [f for f in frames[turn:] if sign * f["ball"][0] > 0]
-    # Only a return that bounced on the server's half (the ball's fall turned into a rise over the
-    # table): a ball the server had to play.
-    zs = [f["ball"][2] for f in back]
+    # The return's flight on the server's side: from its crossing of x = 0 until it next turns
+    # back or the rally ends.
+    back = []
+    for i in range(turn + 1, len(frames)):
+        if sign * xs[i] > 0:
+            back.append(frames[i])
+            if i + 1 < len(xs) and (xs[i + 1] - xs[i]) * sign < 0:
+                break
+        elif back:
+            break
+    # Only a return that bounced on the server's half of the table (the ball's fall turned into a
+    # rise low over the table; the rally's last frame is not one): a ball the server had to play.
     bounced = any(
-        zs[i] < zs[i - 1] and zs[i] <= zs[i + 1] and abs(back[i]["ball"][0]) < TABLE_HALF_LENGTH
-        for i in range(1, len(zs) - 1)
+        back[i]["ball"][2] < back[i - 1]["ball"][2]
+        and back[i]["ball"][2] <= back[i + 1]["ball"][2]
+        and back[i]["ball"][2] < TABLE_TOP + 0.25
+        and abs(back[i]["ball"][0]) < TABLE_HALF_LENGTH + SLACK
+        and abs(back[i]["ball"][1] - TABLE_CENTER_Y) < TABLE_HALF_WIDTH + SLACK
+        for i in range(1, len(back) - 1)
     )
     if not bounced:
         return None
-    best = min(back, key=lambda f: math.dist(f["ball"], f["paddle_" + side][:3]))
-    q = best["qpos_" + side]
-    return math.dist(best["ball"], best["paddle_" + side][:3]), q[0], q[1]
+    pairs = list(zip(back, back[1:])) or [(back[0], back[0])]
+    f0, f1 = min(pairs, key=lambda fs: closest(fs[0], fs[1], side))
+    q = f0["qpos_" + side]
+    return closest(f0, f1, side), q[0], q[1]
 
 
 def main():
