@@ -82,9 +82,9 @@ def server_drift(frames):
     if not bounced:
         return None
     pairs = list(zip(back, back[1:])) or [(back[0], back[0])]
-    f0, f1 = min(pairs, key=lambda fs: closest(fs[0], fs[1], side))
+    d, f0 = min(((closest(a, b, side), a) for a, b in pairs), key=lambda t: t[0])
     q = f0["qpos_" + side]
-    return closest(f0, f1, side), q[0], q[1]
+    return d, q[0], q[1]
 
 
 def main():
