@@ -244,3 +244,26 @@ fn a_builtin_checkpoint_prints_as_committed_and_an_unknown_name_is_a_usage_error
         "{err}"
     );
 }
+
+#[test]
+fn eval_with_a_lead_in_says_so() {
+    let out = rally(&[
+        "eval",
+        "scripted",
+        "--episodes",
+        "3",
+        "--serve",
+        "stroke",
+        "--lead-in",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains("stroke serves after a lead-in"), "{table}");
+    let json = rally(&["eval", "scripted", "--episodes", "3", "--lead-in", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    assert_eq!(v["lead_in"], true);
+}

@@ -43,6 +43,7 @@ fn main() {
         ),
     };
     let e = Evaluation {
+        lead_in: false,
         model: Arc::new(model),
         config,
         preset: sim::arena::MYOCHALLENGE,

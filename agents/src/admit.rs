@@ -108,6 +108,7 @@ mod tests {
 
     fn qualification(episodes: usize) -> Evaluation {
         Evaluation {
+            lead_in: false,
             model: Arc::new(sim::config::default_model()),
             config: sim::config::ArenaConfig::default(),
             preset: sim::arena::MYOCHALLENGE,

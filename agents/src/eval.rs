@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
-use sim::arena::Preset;
+use sim::arena::{Preset, Side};
 use sim::config::ArenaConfig;
 use sim::episode::SingleServe;
 use sim::model::Model;
@@ -140,6 +140,9 @@ pub struct EvalReport {
     pub after_contact_steps: Option<f64>,
     /// How many episodes ended each way.
     pub ends: Vec<(String, usize)>,
+    /// Every episode began with a lead-in ([`Evaluation::lead_in`]).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub lead_in: bool,
 }
 
 /// How a finished single-serve episode ended: SUCCESS, the referee's reason, or TIME_LIMIT.
@@ -204,6 +207,7 @@ pub fn play_traced(
     let (mut effort, mut l1, mut steps) = (0.0, 0.0, 0usize);
     // Activation summed up to and including the first contact, and the step count there.
     let mut to_contact: Option<(f64, usize)> = None;
+    let mut k = 0;
     loop {
         ctrl.copy_from_slice(&env.robot.state.ctrl);
         let ok = player
@@ -217,7 +221,7 @@ pub fn play_traced(
                 .unwrap_or_default();
             t.push(TraceStep {
                 episode: 0,
-                step: steps,
+                step: k,
                 time: env.world.time,
                 observation,
                 action,
@@ -229,7 +233,12 @@ pub fn play_traced(
             break;
         }
         env.robot.state.ctrl.copy_from_slice(&ctrl);
+        let lead_in = env.in_lead_in();
         let done = env.step().done;
+        k += 1;
+        if lead_in && !done {
+            continue;
+        }
         let act = &env.robot.state.act;
         effort += muscles.iter().map(|&a| act[a] * act[a]).sum::<f64>().sqrt() / na;
         l1 += muscles.iter().map(|&a| act[a].abs()).sum::<f64>() / na;
@@ -272,6 +281,11 @@ pub struct Evaluation {
     pub episodes: usize,
     /// Evaluation seed.
     pub seed: u64,
+    /// Every episode begins with a lead-in (see [`SingleServe::start_lead_in`]): the robot's own
+    /// return, a stroke ball it struck, flies away first, so the serve finds the robot as it is
+    /// between two strokes of a rally; drawn after the serve, so the serves are the same as
+    /// without. The figures count from the serve on.
+    pub lead_in: bool,
 }
 
 /// Evaluates `spec` as `e` says; `progress` is called after each episode.
@@ -292,14 +306,16 @@ pub fn evaluate_traced(
     progress: &(dyn Fn() + Sync),
     trace: bool,
 ) -> Result<(EvalReport, Vec<TraceStep>), String> {
-    let (model, config, preset, kind, episodes, seed) = (
+    let (model, config, preset, kind, episodes, seed, lead_in) = (
         e.model.clone(),
         &e.config,
         e.preset,
         e.kind,
         e.episodes,
         e.seed,
+        e.lead_in,
     );
+    let bounce = sim::predict::BounceModel::for_table(&preset.table);
     // Fail early, once, on anything wrong with the player or the arena.
     SingleServe::new(model.clone(), config, preset)?;
     spec.build(&model, &preset, 0)?;
@@ -317,7 +333,13 @@ pub fn evaluate_traced(
         |(env, player), i| {
             let (serve_seed, agent_seed) = episode_seeds(seed, i);
             player.reseed(agent_seed);
-            env.reset(kind, &mut Rng::seeded(serve_seed), None);
+            let mut rng = Rng::seeded(serve_seed);
+            env.reset(kind, &mut rng, None);
+            if lead_in {
+                let away =
+                    sim::serve::generate(ServeKind::Stroke { server: Side::A }, &mut rng, &bounce);
+                env.start_lead_in(away.ball, sim::episode::LEAD_IN_STEPS);
+            }
             let mut steps = Vec::new();
             let r = play_traced(env, player.as_mut(), trace.then_some(&mut steps));
             for s in &mut steps {
@@ -376,6 +398,7 @@ pub fn evaluate_traced(
                 / results.iter().map(|r| r.steps).sum::<usize>().max(1) as f64,
         ),
         ends,
+        lead_in,
     };
     Ok((report, traces.into_iter().flatten().collect()))
 }

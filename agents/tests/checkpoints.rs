@@ -46,6 +46,7 @@ fn templates_of_every_controller_validate_round_trip_and_play() {
         let back = Checkpoint::from_json(&text, &m).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(back, ck);
         let e = Evaluation {
+            lead_in: false,
             model: m.clone(),
             config: sim::config::ArenaConfig::default(),
             preset: sim::arena::MYOCHALLENGE,

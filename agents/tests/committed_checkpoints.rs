@@ -28,6 +28,7 @@ fn committed_checkpoints_load_validate_and_play() {
         let stem = path.file_stem().unwrap().to_string_lossy().to_string();
         assert_eq!(c.name, stem, "{}: its name is its file's", path.display());
         let e = agents::eval::Evaluation {
+            lead_in: false,
             model: m.clone(),
             config: sim::config::ArenaConfig::default(),
             preset: sim::arena::MYOCHALLENGE,

@@ -259,6 +259,7 @@ fn myosuite_robot_plays_as_its_golden() {
             .unwrap_or_else(|e| panic!("{e}")),
     );
     let e = agents::eval::Evaluation {
+        lead_in: false,
         model: m.clone(),
         config: sim::config::ArenaConfig::myochallenge(),
         preset: MYOCHALLENGE,

@@ -107,6 +107,7 @@ fn every_method_trains_on_it_and_its_run_resumes_only_on_it() {
         ck.validate(&m)
             .unwrap_or_else(|e| panic!("{method:?}: {e}"));
         let e = Evaluation {
+            lead_in: false,
             model: m.clone(),
             config: arena.clone(),
             preset: sim::arena::MYOCHALLENGE,
@@ -139,6 +140,7 @@ fn the_scripted_agent_returns_p2_serves() {
     // 200 serves of a seed the agent's parameters were never chosen on (they are the built-in
     // body's, unchanged); the acceptance figure (1000 serves) is `rally eval` in `.ci/run`.
     let e = Evaluation {
+        lead_in: false,
         model: m,
         config: ArenaConfig::myochallenge(),
         preset: sim::arena::MYOCHALLENGE,

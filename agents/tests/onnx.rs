@@ -82,6 +82,7 @@ fn an_onnx_policy_matches_numpy_and_plays() {
     }
     assert!(worst < 1e-5, "tract vs numpy: {worst}");
     let e = agents::eval::Evaluation {
+        lead_in: false,
         model: m.clone(),
         config: sim::config::ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,
@@ -217,6 +218,7 @@ fn a_network_whose_output_is_not_finite_in_play_forfeits_instead_of_panicking() 
     }
     ck.validate(&m).unwrap_or_else(|e| panic!("{e}"));
     let e = agents::eval::Evaluation {
+        lead_in: false,
         model: m.clone(),
         config: sim::config::ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,

@@ -18,6 +18,7 @@ fn evaluation_builds_one_player_per_worker_and_gives_the_per_episode_numbers() {
     let spec = PlayerSpec::scripted("scripted").unwrap();
     let episodes = 24;
     let e = Evaluation {
+        lead_in: false,
         model: m.clone(),
         config: sim::config::ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,

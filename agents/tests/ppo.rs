@@ -353,6 +353,7 @@ fn round_trip_and_play(
     let text = serde_json::to_string(ck).unwrap();
     let back = Arc::new(agents::checkpoint::Checkpoint::from_json(&text, m).unwrap());
     let e = agents::eval::Evaluation {
+        lead_in: false,
         model: m.clone(),
         config: sim::config::ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,

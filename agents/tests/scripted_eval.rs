@@ -9,6 +9,7 @@ use sim::serve::ServeKind;
 
 fn evaluation(seed: u64, episodes: usize) -> Evaluation {
     Evaluation {
+        lead_in: false,
         model: Arc::new(sim::config::default_model()),
         config: sim::config::ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,

@@ -389,6 +389,7 @@ fn evaluate(
         spec = spec.mean_action();
     }
     let e = agents::eval::Evaluation {
+        lead_in: false,
         model: body,
         config: arena,
         preset: sim::arena::MYOCHALLENGE,

@@ -184,6 +184,7 @@ async fn admit_builtin(
     text: String,
 ) -> anyhow::Result<Admission> {
     let eval = agents::eval::Evaluation {
+        lead_in: false,
         model: arena.model.clone(),
         config: arena.config.clone(),
         preset: sim::arena::MYOCHALLENGE,

@@ -1,7 +1,8 @@
 //! The paper's two environments as state machines over the physics (docs/design.md §4, paper §V-A):
 //!
 //! - [`SingleServe`]: a MyoChallenge serve (P0/P1/P2) to robot A; 300 control steps at 100 Hz, ending
-//!   early on the rules — a legal return (success), or the first failure.
+//!   early on the rules — a legal return (success), or the first failure. Optionally after a lead-in
+//!   (ours): the robot's own return flying away from it until the other side would strike it.
 //! - [`Rally`]: the dual arena; the paper's heuristic serve from the server's hitting plane, then
 //!   play until the first failure, or CAPPED after `rally.cap` legal returns or `rally.max_seconds`.
 //!   Every incoming ball's crossing of its receiver's hitting plane is recorded for the drift
@@ -104,7 +105,14 @@ pub struct SingleServe {
     preset: Preset,
     /// What P2 draws besides the ball (the arena configuration's `[p2]`).
     p2: Option<crate::config::P2Draws>,
+    /// In the lead-in (see [`SingleServe::start_lead_in`]).
+    lead_in: bool,
+    /// The lead-in's longest duration, control steps.
+    lead_in_steps: usize,
 }
+
+/// The longest lead-in, in control steps: a return from A's hitting plane reaches B's in 0.4–1.0 s.
+pub const LEAD_IN_STEPS: usize = 150;
 
 impl SingleServe {
     /// An episode environment (call [`SingleServe::reset`] before stepping).
@@ -132,6 +140,8 @@ impl SingleServe {
             ball_friction: 1.0,
             preset,
             p2: config.p2.clone(),
+            lead_in: false,
+            lead_in_steps: LEAD_IN_STEPS,
         })
     }
 
@@ -170,6 +180,66 @@ impl SingleServe {
         self.hit = false;
         self.success = false;
         self.done = false;
+        self.lead_in = false;
+        self.max_steps = arena::EPISODE_STEPS;
+    }
+
+    /// Puts a lead-in before the serve of the episode just reset (ours, for rallies): `away`, a ball
+    /// struck by the robot towards B, is in play first, unjudged, as a return of its own is between
+    /// two strokes of a rally; once it reaches B's hitting plane (or falls below the table, or after
+    /// `steps` control steps, at most [`LEAD_IN_STEPS`]), the episode's serve comes into play from
+    /// its start and the episode goes on as any other for its full length, the robot as the lead-in
+    /// left it. Nothing the robot does in the lead-in counts as a hit.
+    pub fn start_lead_in(&mut self, away: BallState, steps: usize) {
+        if steps == 0 {
+            return;
+        }
+        self.world = BallWorld::new(self.preset, away);
+        self.lead_in = true;
+        self.lead_in_steps = steps.min(LEAD_IN_STEPS);
+        self.max_steps = self.lead_in_steps + arena::EPISODE_STEPS;
+    }
+
+    /// Whether the ball in play is still the lead-in's.
+    pub fn in_lead_in(&self) -> bool {
+        self.lead_in
+    }
+
+    /// One lead-in step: physics and grip only; then, if the lead-in's ball is away, the serve.
+    fn lead_in_step(&mut self, report: &mut StepReport) {
+        for _ in 0..arena::SUBSTEPS {
+            if let Some(g) = self.robot.physics_step() {
+                report.grip.push((Side::A, g));
+                if g == GripEvent::Dropped {
+                    report.calls.extend(self.referee.report(
+                        Side::A,
+                        Failure::DroppedPaddle,
+                        self.world.time,
+                    ));
+                }
+            }
+            let mut events = Vec::new();
+            self.world
+                .physics_step(&[self.robot.ball_paddle()], &mut events);
+            for (_, point, impulse) in self.world.paddle_impulses.clone() {
+                self.robot.receive_ball_impulse(&point, &impulse);
+            }
+            report.events.extend(events);
+        }
+        self.steps += 1;
+        let ball = &self.world.ball;
+        if ball.pos.x <= Side::B.strike_plane_x()
+            || ball.pos.z < arena::TABLE_TOP_Z - 0.3
+            || self.steps >= self.lead_in_steps
+        {
+            let time = self.world.time;
+            self.world = BallWorld::new(self.preset, self.serve.ball);
+            self.world.time = time;
+            self.lead_in = false;
+            self.max_steps = self.steps + arena::EPISODE_STEPS;
+        }
+        self.done = self.referee.end().is_some();
+        report.done = self.done;
     }
 
     /// One control step with the controls the caller set on `robot.state.ctrl`.
@@ -177,6 +247,10 @@ impl SingleServe {
         let mut report = StepReport::default();
         if self.done {
             report.done = true;
+            return report;
+        }
+        if self.lead_in {
+            self.lead_in_step(&mut report);
             return report;
         }
         for _ in 0..arena::SUBSTEPS {

@@ -159,3 +159,69 @@ fn p2_of_an_arena_with_p2_draws_draws_the_paddle_mass_and_ball_friction_after_th
     assert_ne!(m1, m2);
     assert_ne!(q1, q2);
 }
+
+#[test]
+fn a_lead_in_flies_the_robots_own_return_away_then_brings_the_serve_from_its_start() {
+    let cfg = ArenaConfig::default();
+    let bounce = sim::predict::BounceModel::for_table(&MYOCHALLENGE.table);
+    let mut env = SingleServe::new(model(), &cfg, MYOCHALLENGE).unwrap();
+    let mut rng = Rng::seeded(12);
+    for _ in 0..5 {
+        env.reset(ServeKind::Stroke { server: Side::B }, &mut rng, None);
+        let serve = env.serve;
+        let away = sim::serve::generate(ServeKind::Stroke { server: Side::A }, &mut rng, &bounce);
+        env.start_lead_in(away.ball, sim::episode::LEAD_IN_STEPS);
+        assert!(env.in_lead_in());
+        assert_eq!(env.world.ball.pos, away.ball.pos);
+        // The lead-in: the ball flies towards B, nothing is judged, the robot goes on moving.
+        let mut last_x = env.world.ball.pos.x;
+        while env.in_lead_in() {
+            let report = env.step();
+            assert!(!report.done && report.calls.is_empty(), "{report:?}");
+            assert!(env.steps <= sim::episode::LEAD_IN_STEPS);
+            if env.in_lead_in() {
+                assert!(
+                    env.world.ball.pos.x < last_x,
+                    "the lead-in's ball flies away"
+                );
+                last_x = env.world.ball.pos.x;
+            }
+        }
+        let lead = env.steps;
+        // It ended when the ball reached B's hitting plane, not at the limit.
+        assert!(last_x <= Side::B.strike_plane_x() + 0.2, "x {last_x}");
+        assert!(
+            (30..sim::episode::LEAD_IN_STEPS).contains(&lead),
+            "{lead} steps"
+        );
+        // The serve is in play from its start, at the lead-in's time, with a full episode ahead.
+        assert_eq!(env.world.ball.pos, serve.ball.pos);
+        assert_eq!(env.world.ball.vel, serve.ball.vel);
+        assert!((env.world.time - lead as f64 * sim::arena::CONTROL_DT).abs() < 1e-9);
+        assert_eq!(env.max_steps, lead + sim::arena::EPISODE_STEPS);
+        assert!(!env.hit && !env.success);
+        // Then as any episode: unreturned, the serve is A's miss.
+        while !env.step().done {}
+        assert_eq!(env.referee.end().unwrap().failing_side, Some(Side::A));
+        assert!(env.steps < lead + sim::arena::EPISODE_STEPS);
+        // A reset clears the lead-in.
+        env.reset(ServeKind::P2, &mut rng, None);
+        assert!(!env.in_lead_in() && env.max_steps == sim::arena::EPISODE_STEPS);
+    }
+    // A lead-in cut short: the serve comes after that many steps; none at all for 0.
+    env.reset(ServeKind::P2, &mut rng, None);
+    let serve = env.serve;
+    let away = sim::serve::generate(ServeKind::Stroke { server: Side::A }, &mut rng, &bounce);
+    env.start_lead_in(away.ball, 0);
+    assert!(!env.in_lead_in());
+    assert_eq!(env.world.ball.pos, serve.ball.pos);
+    env.start_lead_in(away.ball, 7);
+    let mut lead = 0;
+    while env.in_lead_in() {
+        env.step();
+        lead += 1;
+    }
+    assert_eq!(lead, 7);
+    assert_eq!(env.world.ball.pos, serve.ball.pos);
+    assert_eq!(env.max_steps, 7 + sim::arena::EPISODE_STEPS);
+}

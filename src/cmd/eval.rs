@@ -39,6 +39,12 @@ pub struct EvalArgs {
     /// nothing drawn.
     #[arg(long)]
     mean_action: bool,
+    /// Begin every episode with a lead-in: the robot's own return (a stroke ball struck by it)
+    /// flies away to the other hitting plane first, then the serve comes to the robot as that left
+    /// it, as between two strokes of a rally. The serves are the same as without; the figures count
+    /// from the serve on.
+    #[arg(long)]
+    lead_in: bool,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     json: bool,
@@ -54,8 +60,12 @@ pub struct EvalArgs {
 
 fn print_table(r: &EvalReport, model: &str) {
     println!(
-        "{} on {} {} serves (seed {}, model {model}):",
-        r.agent, r.episodes, r.serve, r.seed
+        "{} on {} {} serves{} (seed {}, model {model}):",
+        r.agent,
+        r.episodes,
+        r.serve,
+        if r.lead_in { " after a lead-in" } else { "" },
+        r.seed
     );
     let rate = |name: &str, x: &agents::eval::Rate| {
         println!(
@@ -116,6 +126,7 @@ pub fn run(args: &EvalArgs) -> Result<(), CliError> {
     );
     let tick = || bar.inc(1);
     let evaluation = Evaluation {
+        lead_in: args.lead_in,
         model,
         config,
         preset: args.preset,

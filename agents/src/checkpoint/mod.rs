@@ -151,6 +151,13 @@ pub struct Training {
     /// The ablation it was trained under (the paper's §V-C); absent: none, Diff-Muscle itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ablation: Option<crate::env::Ablation>,
+    /// The share of its single-serve episodes that began with a lead-in (`lead_in` of the training
+    /// configuration); absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lead_in: Option<f64>,
+    /// How long those lead-ins lasted (`lead_in_length`), when not `full`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lead_in_length: Option<crate::env::single::LeadInLength>,
 }
 
 fn default_robot() -> String {

@@ -24,6 +24,19 @@ pub enum EpisodeEnd {
     Training,
 }
 
+/// How long a training lead-in lasts (see [`Env::lead_in`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LeadInLength {
+    /// Until its ball reaches the other robot's hitting plane (as in a rally; `rally eval
+    /// --lead-in`).
+    #[default]
+    Full,
+    /// Cut after a share of that flight drawn uniformly from (0, 1]: short lead-ins, which leave the
+    /// robot near its start, beside long ones.
+    Spread,
+}
+
 /// The official code's training noise: Gaussian, σ on the policy's actions (in [−1, 1], clipped
 /// after) and σ on K-MAC's activation targets (before its clamp), from streams seeded per episode.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -84,7 +97,16 @@ pub struct Env {
     /// Training noise (the official code's): σ on the actions, σ on K-MAC's activation targets; 0:
     /// none (evaluation).
     pub noise: TrainingNoise,
+    /// Share of episodes, in [0, 1], that begin with a lead-in (ours, for rallies; see
+    /// [`sim::episode::SingleServe::start_lead_in`]): the robot's own return, a stroke ball struck by
+    /// A, flies away before the serve comes, and the `ready` term pays for the paddle staying where
+    /// it started meanwhile. 0: none (evaluation, and the default).
+    pub lead_in: f64,
+    /// How long a lead-in lasts.
+    pub lead_in_length: LeadInLength,
     noise_rng: Rng,
+    /// The paddle's position at the episode's start: the `ready` term's target.
+    ready: nalgebra::Vector3<f64>,
     obs: Vec<f64>,
     ctrl: Vec<f64>,
     bounce: BounceModel,
@@ -118,7 +140,10 @@ impl Env {
             grip_floor: 0.0,
             bank: None,
             noise: TrainingNoise::default(),
+            lead_in: 0.0,
+            lead_in_length: LeadInLength::Full,
             noise_rng: Rng::seeded(0),
+            ready: nalgebra::Vector3::zeros(),
             obs: Vec::new(),
             bounce: BounceModel::for_table(&preset.table),
             stroke: StrokeReward::default(),
@@ -177,6 +202,32 @@ impl Env {
             ),
             None => self.episode.reset(self.kind, &mut rng, None),
         }
+        // Drawn after the serve, so that an episode without a lead-in is served as before.
+        if self.lead_in > 0.0 && rng.unit() < self.lead_in {
+            let away = sim::serve::generate(
+                sim::serve::ServeKind::Stroke { server: Side::A },
+                &mut rng,
+                &self.bounce,
+            );
+            let steps = match self.lead_in_length {
+                LeadInLength::Full => sim::episode::LEAD_IN_STEPS,
+                LeadInLength::Spread => {
+                    let plane = Side::B.strike_plane_x();
+                    let flight = sim::predict::plane_crossing(
+                        &away.ball.pos,
+                        &away.ball.vel,
+                        plane,
+                        &self.bounce,
+                    )
+                    .map_or(sim::episode::LEAD_IN_STEPS as f64, |c| {
+                        c.t / arena::CONTROL_DT
+                    });
+                    (rng.unit() * flight).ceil().max(1.0) as usize
+                }
+            };
+            self.episode.start_lead_in(away.ball, steps);
+        }
+        self.ready = self.episode.robot.paddle.pose.pos;
         self.observer.reset(planner_seed);
         if self.noise.action > 0.0 || self.noise.activation > 0.0 {
             // Streams of their own, so that the serve and the planner draw as without noise.
@@ -239,11 +290,13 @@ impl Env {
         );
         apply_grip_floor(&self.episode.robot, self.grip_floor, &mut self.ctrl);
         self.episode.robot.state.ctrl.copy_from_slice(&self.ctrl);
+        let lead_in = self.episode.in_lead_in();
         let report = self.episode.step();
         let robot = &self.episode.robot;
         let ball = self.episode.world.ball;
         let t = self.episode.world.time;
-        let contact = paddle_contact(&report, Side::A);
+        // A touch of the lead-in's ball is no stroke.
+        let contact = !lead_in && paddle_contact(&report, Side::A);
         let plan = self.observer.command().map(|(p, _)| *p);
         let strike_time = self.observer.command().map(|(_, t_hit)| *t_hit);
         let (terms, judged) = self.stroke.step(
@@ -259,6 +312,11 @@ impl Env {
         );
         if judged {
             self.predicted_success = self.stroke.legal;
+        }
+        let mut terms = terms;
+        if lead_in {
+            let d = (robot.paddle.pose.pos - self.ready).norm();
+            terms.ready = sim::math::exp(-4.0 * d);
         }
         let mut done = report.done;
         if self.end == EpisodeEnd::Training {

@@ -450,6 +450,24 @@ pub struct TrainConfig {
     /// `after_bounce`, once more from the ball's real state after its bounce (the official code's
     /// second plan; see [`crate::observation::Replan`]). The checkpoint records it.
     pub replan: crate::observation::Replan,
+    /// Share of single-serve episodes that begin with a lead-in, in [0, 1] (ours, for rallies; see
+    /// [`crate::env::Env::lead_in`]): the robot's own return flies away first, as between two
+    /// strokes of a rally, and the `ready` term is paid meanwhile. 0 (the default): none. The
+    /// checkpoint records it.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub lead_in: f64,
+    /// How long a lead-in lasts: `full` (the default: until its ball reaches the other hitting
+    /// plane) or `spread` (cut after a uniform share of that).
+    #[serde(skip_serializing_if = "is_full")]
+    pub lead_in_length: crate::env::single::LeadInLength,
+}
+
+fn is_full(l: &crate::env::single::LeadInLength) -> bool {
+    *l == crate::env::single::LeadInLength::Full
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// A ball bank for the single-serve environment (ours; see [`crate::env::BallBank`]): the file
@@ -523,7 +541,7 @@ impl TrainConfig {
     /// Refuses settings PPO cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         let p = &self.ppo;
-        let checks: [(&str, bool); 20] = [
+        let checks: [(&str, bool); 21] = [
             ("ppo.envs", p.envs >= 1),
             ("ppo.steps_per_env", p.steps_per_env >= 1),
             ("ppo.epochs", p.epochs >= 1),
@@ -567,6 +585,7 @@ impl TrainConfig {
                 self.validation.noise_scale.is_finite() && self.validation.noise_scale >= 0.0,
             ),
             ("bank.fraction", (0.0..=1.0).contains(&self.bank.fraction)),
+            ("lead_in", (0.0..=1.0).contains(&self.lead_in)),
             (
                 "bank.refresh_every",
                 self.bank
@@ -601,6 +620,13 @@ impl TrainConfig {
             return Err(
                 "controller.action_noise, controller.activation_noise: the rally \
                         environment draws no training noise; set both to 0 to train in it"
+                    .into(),
+            );
+        }
+        if self.env == TrainEnv::Rally && self.lead_in > 0.0 {
+            return Err(
+                "lead_in: a lead-in is for single serves; in the rally environment the robot's \
+                 own returns fly away by themselves"
                     .into(),
             );
         }

@@ -171,6 +171,7 @@ fn agent_rates(
     let start = Instant::now();
     while start.elapsed() < budget {
         let e = Evaluation {
+            lead_in: false,
             model: model.clone(),
             config: config.clone(),
             preset: MYOCHALLENGE,

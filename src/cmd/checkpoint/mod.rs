@@ -321,6 +321,7 @@ fn admit(
         std::process::exit(server::ADMIT_SETUP_FAILED);
     }
     let eval = agents::eval::Evaluation {
+        lead_in: false,
         model: body.model,
         config: body.config,
         preset: sim::arena::MYOCHALLENGE,

@@ -203,6 +203,7 @@ pub fn run(args: &ReproduceArgs) -> Result<(), CliError> {
     let body = args.model.load()?;
     let model = body.model.clone();
     let evaluation = Evaluation {
+        lead_in: false,
         model: model.clone(),
         config: body.config.clone(),
         preset: sim::arena::MYOCHALLENGE,

@@ -172,6 +172,8 @@ pub fn make_env(
                 activation: config.controller.activation_noise,
             };
             env.bank = bank.cloned();
+            env.lead_in = config.lead_in;
+            env.lead_in_length = config.lead_in_length;
             let (o, a) = (env.obs_dim(), env.action_dim());
             (TrainingEnv::Single(Box::new(env)), o, a)
         }

@@ -34,6 +34,7 @@ impl Trainer {
             }
             TrainEnv::Single => {
                 let e = crate::eval::Evaluation {
+                    lead_in: false,
                     model: self.model.clone(),
                     config,
                     preset,
@@ -184,6 +185,10 @@ impl Trainer {
                 note: None,
                 noise_scale: None,
                 ablation: (!self.config.ablation.is_none()).then_some(self.config.ablation),
+                lead_in: (self.config.lead_in > 0.0).then_some(self.config.lead_in),
+                lead_in_length: (self.config.lead_in > 0.0
+                    && self.config.lead_in_length != crate::env::single::LeadInLength::Full)
+                    .then_some(self.config.lead_in_length),
             }),
             expected_activation_noise: false,
         })
