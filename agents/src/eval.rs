@@ -185,6 +185,9 @@ pub struct TraceStep {
     pub action: Vec<f64>,
     /// The muscle controls the player wrote (every actuator of the robot).
     pub controls: Vec<f64>,
+    /// The step was in the episode's lead-in (`rally eval --lead-in`); left out when not.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub lead_in: bool,
 }
 
 /// Plays the episode `env` was just reset to (any serve, e.g. a bank ball) with `player`.
@@ -209,6 +212,7 @@ pub fn play_traced(
     let mut to_contact: Option<(f64, usize)> = None;
     let mut k = 0;
     loop {
+        let lead_in = env.in_lead_in();
         ctrl.copy_from_slice(&env.robot.state.ctrl);
         let ok = player
             .act(&env.robot, &env.world.ball, env.world.time, &mut ctrl)
@@ -222,6 +226,7 @@ pub fn play_traced(
             t.push(TraceStep {
                 episode: 0,
                 step: k,
+                lead_in,
                 time: env.world.time,
                 observation,
                 action,
@@ -233,10 +238,13 @@ pub fn play_traced(
             break;
         }
         env.robot.state.ctrl.copy_from_slice(&ctrl);
-        let lead_in = env.in_lead_in();
         let done = env.step().done;
         k += 1;
-        if lead_in && !done {
+        if lead_in {
+            // The figures count from the serve on.
+            if done {
+                break;
+            }
             continue;
         }
         let act = &env.robot.state.act;

@@ -143,6 +143,11 @@ fn the_configuration_checks_the_share_and_the_checkpoint_records_it() {
     rally.controller.action_noise = 0.0;
     rally.controller.activation_noise = 0.0;
     assert!(rally.validate().unwrap_err().starts_with("lead_in"));
+    let idle = TrainConfig {
+        lead_in_length: LeadInLength::Spread,
+        ..TrainConfig::default()
+    };
+    assert!(idle.validate().unwrap_err().starts_with("lead_in_length"));
     // Written only when set, so configurations and checkpoints without it read and write as before.
     let text = toml::to_string(&TrainConfig::default()).unwrap();
     assert!(!text.contains("lead_in"), "{text}");
@@ -173,36 +178,66 @@ fn the_configuration_checks_the_share_and_the_checkpoint_records_it() {
 
 #[test]
 fn an_evaluation_with_a_lead_in_plays_the_same_serves_after_the_robots_own_return() {
-    let evaluation = |lead_in| agents::eval::Evaluation {
+    let evaluation = |lead_in, episodes| agents::eval::Evaluation {
         model: model(),
         config: ArenaConfig::default(),
         preset: sim::arena::MYOCHALLENGE,
         kind: sim::serve::ServeKind::Stroke {
             server: sim::arena::Side::B,
         },
-        episodes: 3,
+        episodes,
         seed: 5,
         lead_in,
     };
     let spec = agents::factory::PlayerSpec::scripted("scripted").unwrap();
-    let run =
-        |lead_in| agents::eval::evaluate_traced(&evaluation(lead_in), &spec, &|| {}, true).unwrap();
-    let ((plain, plain_trace), (led, led_trace)) = (run(false), run(true));
+    let run = |lead_in, episodes| {
+        agents::eval::evaluate_traced(&evaluation(lead_in, episodes), &spec, &|| {}, true).unwrap()
+    };
+    let ((plain, plain_trace), (led, led_trace)) = (run(false, 3), run(true, 3));
     assert!(led.lead_in && !plain.lead_in);
     let json = serde_json::to_value(&plain).unwrap();
     assert!(json.get("lead_in").is_none(), "left out when off: {json}");
     assert_eq!(serde_json::to_value(&led).unwrap()["lead_in"], true);
+    assert!(plain_trace.iter().all(|s| !s.lead_in));
     for episode in 0..3 {
-        let steps = |t: &[agents::eval::TraceStep]| {
-            t.iter()
-                .filter(|s| s.episode == episode)
-                .map(|s| (s.step, s.time))
-                .collect::<Vec<_>>()
+        let of = |t: &[agents::eval::TraceStep]| -> Vec<agents::eval::TraceStep> {
+            t.iter().filter(|s| s.episode == episode).cloned().collect()
         };
-        let (a, b) = (steps(&plain_trace), steps(&led_trace));
-        // Every step is traced, the lead-in's too, numbered on.
-        assert!(b.iter().enumerate().all(|(i, (k, _))| *k == i));
-        assert!(b.len() > 30 && !a.is_empty(), "{} and {}", b.len(), a.len());
-        assert_eq!((a[0].1, b[0].1), (0.0, 0.0));
+        let (a, b) = (of(&plain_trace), of(&led_trace));
+        // Every step is traced, the lead-in's marked and numbered on with the rest.
+        assert!(b.iter().enumerate().all(|(i, s)| s.step == i));
+        let lead = b.iter().take_while(|s| s.lead_in).count();
+        assert!(lead > 20 && b[lead..].iter().all(|s| !s.lead_in), "{lead}");
+        assert!(!a.is_empty() && b.len() > lead);
+        // The serve starts where the lead-in's ball left off, the same serve as without.
+        let serve_time = b[lead].time;
+        assert!((serve_time - lead as f64 * sim::arena::CONTROL_DT).abs() < 1e-9);
+    }
+    // The figures count from the serve on: an episode's steps are the trace's after its lead-in.
+    let kind = sim::serve::ServeKind::Stroke {
+        server: sim::arena::Side::B,
+    };
+    let bounce = sim::predict::BounceModel::for_table(&sim::arena::MYOCHALLENGE.table);
+    let mut env =
+        sim::episode::SingleServe::new(model(), &ArenaConfig::default(), sim::arena::MYOCHALLENGE)
+            .unwrap();
+    let mut player = spec.build(&model(), &sim::arena::MYOCHALLENGE, 0).unwrap();
+    for seed in 0..3 {
+        let mut rng = sim::rng::Rng::seeded(seed);
+        env.reset(kind, &mut rng, None);
+        let away = sim::serve::generate(
+            sim::serve::ServeKind::Stroke {
+                server: sim::arena::Side::A,
+            },
+            &mut rng,
+            &bounce,
+        );
+        env.start_lead_in(away.ball, sim::episode::LEAD_IN_STEPS);
+        let mut trace = Vec::new();
+        let r = agents::eval::play_traced(&mut env, player.as_mut(), Some(&mut trace));
+        let lead = trace.iter().filter(|s| s.lead_in).count();
+        assert!(lead > 20, "seed {seed}: {lead}");
+        assert_eq!(r.steps, trace.len() - lead, "seed {seed}");
+        assert!(r.steps <= sim::arena::EPISODE_STEPS);
     }
 }

@@ -109,9 +109,12 @@ pub struct SingleServe {
     lead_in: bool,
     /// The lead-in's longest duration, control steps.
     lead_in_steps: usize,
+    /// The control step at which the serve came into play (0 without a lead-in).
+    serve_step: usize,
 }
 
-/// The longest lead-in, in control steps: a return from A's hitting plane reaches B's in 0.4–1.0 s.
+/// The longest lead-in, in control steps (a return from A's hitting plane reaches B's in about
+/// 0.3–0.6 s).
 pub const LEAD_IN_STEPS: usize = 150;
 
 impl SingleServe {
@@ -142,6 +145,7 @@ impl SingleServe {
             p2: config.p2.clone(),
             lead_in: false,
             lead_in_steps: LEAD_IN_STEPS,
+            serve_step: 0,
         })
     }
 
@@ -181,6 +185,7 @@ impl SingleServe {
         self.success = false;
         self.done = false;
         self.lead_in = false;
+        self.serve_step = 0;
         self.max_steps = arena::EPISODE_STEPS;
     }
 
@@ -191,6 +196,7 @@ impl SingleServe {
     /// its start and the episode goes on as any other for its full length, the robot as the lead-in
     /// left it. Nothing the robot does in the lead-in counts as a hit.
     pub fn start_lead_in(&mut self, away: BallState, steps: usize) {
+        debug_assert!(self.steps == 0 && !self.done, "a lead-in starts an episode");
         if steps == 0 {
             return;
         }
@@ -205,54 +211,32 @@ impl SingleServe {
         self.lead_in
     }
 
-    /// One lead-in step: physics and grip only; then, if the lead-in's ball is away, the serve.
+    /// One lead-in step: physics and grip only; then, once the lead-in's ball is away (at B's
+    /// hitting plane, below the table, or no longer flying away from the robot) or its time is up,
+    /// the serve, so that a player's next look at the ball finds the serve coming.
     fn lead_in_step(&mut self, report: &mut StepReport) {
-        for _ in 0..arena::SUBSTEPS {
-            if let Some(g) = self.robot.physics_step() {
-                report.grip.push((Side::A, g));
-                if g == GripEvent::Dropped {
-                    report.calls.extend(self.referee.report(
-                        Side::A,
-                        Failure::DroppedPaddle,
-                        self.world.time,
-                    ));
-                }
-            }
-            let mut events = Vec::new();
-            self.world
-                .physics_step(&[self.robot.ball_paddle()], &mut events);
-            for (_, point, impulse) in self.world.paddle_impulses.clone() {
-                self.robot.receive_ball_impulse(&point, &impulse);
-            }
-            report.events.extend(events);
-        }
+        self.substeps(false, report);
         self.steps += 1;
         let ball = &self.world.ball;
         if ball.pos.x <= Side::B.strike_plane_x()
             || ball.pos.z < arena::TABLE_TOP_Z - 0.3
+            || Side::A.sign() * ball.vel.x >= 0.0
             || self.steps >= self.lead_in_steps
         {
             let time = self.world.time;
             self.world = BallWorld::new(self.preset, self.serve.ball);
             self.world.time = time;
             self.lead_in = false;
+            self.serve_step = self.steps;
             self.max_steps = self.steps + arena::EPISODE_STEPS;
         }
         self.done = self.referee.end().is_some();
         report.done = self.done;
     }
 
-    /// One control step with the controls the caller set on `robot.state.ctrl`.
-    pub fn step(&mut self) -> StepReport {
-        let mut report = StepReport::default();
-        if self.done {
-            report.done = true;
-            return report;
-        }
-        if self.lead_in {
-            self.lead_in_step(&mut report);
-            return report;
-        }
+    /// The physics steps of one control step; the referee judges them when `judged` (in a lead-in
+    /// it hears only of a dropped paddle).
+    fn substeps(&mut self, judged: bool, report: &mut StepReport) {
         for _ in 0..arena::SUBSTEPS {
             let grip: Vec<(Side, GripEvent)> = self
                 .robot
@@ -266,17 +250,42 @@ impl SingleServe {
             for (_, point, impulse) in self.world.paddle_impulses.clone() {
                 self.robot.receive_ball_impulse(&point, &impulse);
             }
-            judge(
-                &mut self.referee,
-                &events,
-                self.world.time,
-                self.world.ball.pos.z,
-                &grip,
-                &mut report.calls,
-            );
+            if judged {
+                judge(
+                    &mut self.referee,
+                    &events,
+                    self.world.time,
+                    self.world.ball.pos.z,
+                    &grip,
+                    &mut report.calls,
+                );
+            } else {
+                judge(
+                    &mut self.referee,
+                    &[],
+                    self.world.time,
+                    f64::INFINITY,
+                    &grip,
+                    &mut report.calls,
+                );
+            }
             report.events.extend(events);
             report.grip.extend(grip);
         }
+    }
+
+    /// One control step with the controls the caller set on `robot.state.ctrl`.
+    pub fn step(&mut self) -> StepReport {
+        let mut report = StepReport::default();
+        if self.done {
+            report.done = true;
+            return report;
+        }
+        if self.lead_in {
+            self.lead_in_step(&mut report);
+            return report;
+        }
+        self.substeps(true, &mut report);
         self.steps += 1;
         for call in &report.calls {
             match call {
@@ -298,6 +307,12 @@ impl SingleServe {
         self.done = self.success || self.referee.end().is_some() || self.steps >= self.max_steps;
         report.done = self.done;
         report
+    }
+
+    /// The share of the serve's time limit gone: control steps since the serve came into play over
+    /// the episode's length (in a lead-in, over the lead-in's and the episode's).
+    pub fn elapsed_share(&self) -> f64 {
+        (self.steps - self.serve_step) as f64 / (self.max_steps - self.serve_step).max(1) as f64
     }
 
     /// The policy produced NaN or infinite actions: the episode ends with INVALID_ACTION.

@@ -225,3 +225,47 @@ fn a_lead_in_flies_the_robots_own_return_away_then_brings_the_serve_from_its_sta
     assert_eq!(env.world.ball.pos, serve.ball.pos);
     assert_eq!(env.max_steps, 7 + sim::arena::EPISODE_STEPS);
 }
+
+#[test]
+fn a_lead_in_ends_when_its_ball_turns_back_and_a_dropped_paddle_in_it_loses_the_episode() {
+    let cfg = ArenaConfig::default();
+    let bounce = sim::predict::BounceModel::for_table(&MYOCHALLENGE.table);
+    let mut env = SingleServe::new(model(), &cfg, MYOCHALLENGE).unwrap();
+    let mut rng = Rng::seeded(3);
+    env.reset(ServeKind::P2, &mut rng, None);
+    let serve = env.serve;
+    // A ball that does not fly away (here: towards the robot) is no lead-in's: the serve comes at
+    // once, before any player could plan for the wrong ball.
+    let mut back =
+        sim::serve::generate(ServeKind::Stroke { server: Side::A }, &mut rng, &bounce).ball;
+    back.vel.x = -back.vel.x;
+    env.start_lead_in(back, sim::episode::LEAD_IN_STEPS);
+    env.step();
+    assert!(!env.in_lead_in() && env.steps == 1);
+    assert_eq!(env.world.ball.pos, serve.ball.pos);
+
+    // The robot lets go of its paddle during the lead-in: it drops, and the episode is A's loss.
+    env.reset(ServeKind::P2, &mut rng, None);
+    let away = sim::serve::generate(ServeKind::Stroke { server: Side::A }, &mut rng, &bounce);
+    env.start_lead_in(away.ball, sim::episode::LEAD_IN_STEPS);
+    let grip: Vec<usize> = env.robot.grip_muscles().to_vec();
+    let mut dropped = false;
+    for _ in 0..sim::episode::LEAD_IN_STEPS {
+        for &a in &grip {
+            env.robot.state.ctrl[a] = 0.0;
+            env.robot.state.act[a] = 0.0;
+        }
+        let report = env.step();
+        if report.done {
+            dropped = true;
+            break;
+        }
+    }
+    let end = env.referee.end().expect("judged");
+    assert!(dropped, "{end:?}");
+    assert_eq!(
+        (end.reason, end.failing_side),
+        (EndReason::Failure(Failure::DroppedPaddle), Some(Side::A))
+    );
+    assert!(!env.hit && !env.success);
+}

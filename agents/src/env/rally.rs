@@ -230,7 +230,7 @@ impl RallyEnv {
             );
             if plan.is_none() && !seat.stroke.in_progress() {
                 let d = (robot.paddle.pose.pos - seat.ready).norm();
-                terms.ready = sim::math::exp(-4.0 * d);
+                terms.ready = ready_term(d);
             }
             // This side's return (exchange ≥ 1) crossing the other side's plane in the box.
             terms.dual = new_crossings

@@ -11,6 +11,11 @@ use crate::planner::Plan;
 
 type V3 = Vector3<f64>;
 
+/// The `ready` term at a paddle `distance` (m) from where it started: `exp(−4·d)`.
+pub fn ready_term(distance: f64) -> f64 {
+    sim::math::exp(-4.0 * distance)
+}
+
 /// The reward's terms (paper §IV-B; docs/design.md §6): `r = w_g·r_g + w_c·r_c + w_s·r_s`, each a sum of named
 /// terms. One struct holds both a step's term values (each in [0, 1]) and their weights
 /// ([`RewardWeights`]), so a term is named once.
@@ -46,9 +51,10 @@ pub struct RewardTerms {
     pub in_box: f64,
     /// Task (sparse, once per ball): a return predicted to go into the net or out (official −20).
     pub fault: f64,
-    /// Dual rally only (dense): `exp(−4·d)`, `d` the paddle's distance from where it was at the
-    /// rally's start, while no ball is coming and no stroke is being judged — the paper's "maintain
-    /// stability after striking", so that the robot is ready for the next ball (ours).
+    /// Dual rally and single-serve lead-ins only (dense): [`ready_term`] of the paddle's distance
+    /// from where it was at the rally's (episode's) start, while no ball is coming and no stroke is
+    /// being judged (in a single serve: during its lead-in) — the paper's "maintain stability after
+    /// striking", so that the robot is ready for the next ball (ours).
     #[serde(default)]
     pub ready: f64,
     /// Dual rally only (sparse): the robot's return really crossed the other hitting plane inside the

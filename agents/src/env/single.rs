@@ -176,7 +176,7 @@ impl Env {
     /// velocity over its length range, the paddle's mass (kg) and the ball's friction.
     pub fn privileged_into(&self, out: &mut Vec<f64>) {
         let ep = &self.episode;
-        out.push(ep.steps as f64 / ep.max_steps.max(1) as f64);
+        out.push(ep.elapsed_share());
         let model = ep.robot.held_model();
         out.extend(self.observer.muscles().iter().map(|&a| {
             let lr = model.actuators[a].lengthrange;
@@ -316,7 +316,7 @@ impl Env {
         let mut terms = terms;
         if lead_in {
             let d = (robot.paddle.pose.pos - self.ready).norm();
-            terms.ready = sim::math::exp(-4.0 * d);
+            terms.ready = ready_term(d);
         }
         let mut done = report.done;
         if self.end == EpisodeEnd::Training {

@@ -623,6 +623,13 @@ impl TrainConfig {
                     .into(),
             );
         }
+        if self.lead_in == 0.0 && self.lead_in_length != crate::env::single::LeadInLength::Full {
+            return Err(
+                "lead_in_length: set for no lead-ins; give lead_in a share above 0, or leave \
+                 lead_in_length out"
+                    .into(),
+            );
+        }
         if self.env == TrainEnv::Rally && self.lead_in > 0.0 {
             return Err(
                 "lead_in: a lead-in is for single serves; in the rally environment the robot's \
