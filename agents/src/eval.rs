@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
-use sim::arena::{Preset, Side};
+use sim::arena::Preset;
 use sim::config::ArenaConfig;
 use sim::episode::SingleServe;
 use sim::model::Model;
@@ -323,7 +323,6 @@ pub fn evaluate_traced(
         e.seed,
         e.lead_in,
     );
-    let bounce = sim::predict::BounceModel::for_table(&preset.table);
     // Fail early, once, on anything wrong with the player or the arena.
     SingleServe::new(model.clone(), config, preset)?;
     spec.build(&model, &preset, 0)?;
@@ -344,9 +343,7 @@ pub fn evaluate_traced(
             let mut rng = Rng::seeded(serve_seed);
             env.reset(kind, &mut rng, None);
             if lead_in {
-                let away =
-                    sim::serve::generate(ServeKind::Stroke { server: Side::A }, &mut rng, &bounce);
-                env.start_lead_in(away.ball, sim::episode::LEAD_IN_STEPS);
+                env.draw_lead_in(&mut rng, false);
             }
             let mut steps = Vec::new();
             let r = play_traced(env, player.as_mut(), trace.then_some(&mut steps));

@@ -206,6 +206,23 @@ impl SingleServe {
         self.max_steps = self.lead_in_steps + arena::EPISODE_STEPS;
     }
 
+    /// Draws a lead-in's ball from `rng` (a stroke ball struck by A: [`ServeKind::Stroke`]) and
+    /// starts it (see [`SingleServe::start_lead_in`]); when `cut`, the lead-in ends after a share of
+    /// that ball's flight to B's hitting plane drawn next from `rng`, uniformly from (0, 1].
+    pub fn draw_lead_in(&mut self, rng: &mut Rng, cut: bool) {
+        let bounce = BounceModel::for_table(&self.preset.table);
+        let away = serve::generate(ServeKind::Stroke { server: Side::A }, rng, &bounce).ball;
+        let steps = if cut {
+            let flight =
+                predict::plane_crossing(&away.pos, &away.vel, Side::B.strike_plane_x(), &bounce)
+                    .map_or(LEAD_IN_STEPS as f64, |c| c.t / arena::CONTROL_DT);
+            (rng.unit() * flight).ceil().max(1.0) as usize
+        } else {
+            LEAD_IN_STEPS
+        };
+        self.start_lead_in(away, steps);
+    }
+
     /// Whether the ball in play is still the lead-in's.
     pub fn in_lead_in(&self) -> bool {
         self.lead_in

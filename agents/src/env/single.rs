@@ -204,28 +204,8 @@ impl Env {
         }
         // Drawn after the serve, so that an episode without a lead-in is served as before.
         if self.lead_in > 0.0 && rng.unit() < self.lead_in {
-            let away = sim::serve::generate(
-                sim::serve::ServeKind::Stroke { server: Side::A },
-                &mut rng,
-                &self.bounce,
-            );
-            let steps = match self.lead_in_length {
-                LeadInLength::Full => sim::episode::LEAD_IN_STEPS,
-                LeadInLength::Spread => {
-                    let plane = Side::B.strike_plane_x();
-                    let flight = sim::predict::plane_crossing(
-                        &away.ball.pos,
-                        &away.ball.vel,
-                        plane,
-                        &self.bounce,
-                    )
-                    .map_or(sim::episode::LEAD_IN_STEPS as f64, |c| {
-                        c.t / arena::CONTROL_DT
-                    });
-                    (rng.unit() * flight).ceil().max(1.0) as usize
-                }
-            };
-            self.episode.start_lead_in(away.ball, steps);
+            let cut = self.lead_in_length == LeadInLength::Spread;
+            self.episode.draw_lead_in(&mut rng, cut);
         }
         self.ready = self.episode.robot.paddle.pose.pos;
         self.observer.reset(planner_seed);
