@@ -278,6 +278,11 @@ impl Observer {
         self.rng = Rng::seeded(seed);
     }
 
+    /// Drops the current command, so that the next ball coming is planned afresh.
+    pub fn clear_command(&mut self) {
+        self.plan = None;
+    }
+
     /// The current command, if a ball is coming: the plan and the absolute strike time.
     pub fn command(&self) -> Option<&(Plan, f64)> {
         self.plan.as_ref()

@@ -107,8 +107,8 @@ pub struct SingleServe {
     p2: Option<crate::config::P2Draws>,
     /// In the lead-in (see [`SingleServe::start_lead_in`]).
     lead_in: bool,
-    /// The lead-in's longest duration, control steps.
-    lead_in_steps: usize,
+    /// The control step by which the lead-in ends at the latest.
+    lead_in_until: usize,
     /// The control step at which the serve came into play (0 without a lead-in).
     serve_step: usize,
 }
@@ -144,7 +144,7 @@ impl SingleServe {
             preset,
             p2: config.p2.clone(),
             lead_in: false,
-            lead_in_steps: LEAD_IN_STEPS,
+            lead_in_until: LEAD_IN_STEPS,
             serve_step: 0,
         })
     }
@@ -202,8 +202,25 @@ impl SingleServe {
         }
         self.world = BallWorld::new(self.preset, away);
         self.lead_in = true;
-        self.lead_in_steps = steps.min(LEAD_IN_STEPS);
-        self.max_steps = self.lead_in_steps + arena::EPISODE_STEPS;
+        self.lead_in_until = steps.min(LEAD_IN_STEPS);
+        self.max_steps = self.lead_in_until + arena::EPISODE_STEPS;
+    }
+
+    /// Brings `serve` to the robot after its stroke (ours, for rallies): the ball in play, the
+    /// robot's return, flies on unjudged as a lead-in's does (see [`SingleServe::start_lead_in`]),
+    /// and once it reaches B's hitting plane (or falls below the table, or no longer flies away,
+    /// or after [`LEAD_IN_STEPS`]) `serve` comes into play from its start, the robot as its own
+    /// stroke left it, for a full episode's time. The referee, `hit` and `success` start over
+    /// with the new ball; the paddle's mass and the ball's friction stay the episode's.
+    pub fn follow_on(&mut self, serve: Serve) {
+        debug_assert!(!self.done && !self.lead_in, "a follow-on comes after a stroke");
+        self.referee = Referee::new(serve.server);
+        self.serve = serve;
+        self.hit = false;
+        self.success = false;
+        self.lead_in = true;
+        self.lead_in_until = self.steps + LEAD_IN_STEPS;
+        self.max_steps = self.lead_in_until + arena::EPISODE_STEPS;
     }
 
     /// Draws a lead-in's ball from `rng` (a stroke ball struck by A: [`ServeKind::Stroke`]) and
@@ -238,7 +255,7 @@ impl SingleServe {
         if ball.pos.x <= Side::B.strike_plane_x()
             || ball.pos.z < arena::TABLE_TOP_Z - 0.3
             || Side::A.sign() * ball.vel.x >= 0.0
-            || self.steps >= self.lead_in_steps
+            || self.steps >= self.lead_in_until
         {
             let time = self.world.time;
             self.world = BallWorld::new(self.preset, self.serve.ball);

@@ -158,6 +158,10 @@ pub struct Training {
     /// How long those lead-ins lasted (`lead_in_length`), when not `full`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lead_in_length: Option<crate::env::single::LeadInLength>,
+    /// The share of its judged single-serve strokes that a next serve followed (`follow_on` of the
+    /// training configuration); absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub follow_on: Option<f64>,
 }
 
 fn default_robot() -> String {

@@ -104,6 +104,16 @@ pub struct Env {
     pub lead_in: f64,
     /// How long a lead-in lasts.
     pub lead_in_length: LeadInLength,
+    /// Share of strokes, in [0, 1], that a next serve follows (ours, for rallies; training's
+    /// episode end only): when the stroke is judged ([`EpisodeEnd::Training`]) and the ball is
+    /// still in play, the episode goes on instead of ending — the return flies away unjudged, the
+    /// `ready` term paid meanwhile, and a next serve from the same distribution comes to the robot
+    /// as its stroke left it (see [`sim::episode::SingleServe::follow_on`]). 0: none (the default).
+    pub follow_on: f64,
+    /// The episode's serve stream after the reset's draws: the follow-ons' serves.
+    serve_rng: Rng,
+    /// Returns judged legal in this episode before its current ball.
+    returns: u32,
     noise_rng: Rng,
     /// The paddle's position at the episode's start: the `ready` term's target.
     ready: nalgebra::Vector3<f64>,
@@ -142,6 +152,9 @@ impl Env {
             noise: TrainingNoise::default(),
             lead_in: 0.0,
             lead_in_length: LeadInLength::Full,
+            follow_on: 0.0,
+            serve_rng: Rng::seeded(0),
+            returns: 0,
             noise_rng: Rng::seeded(0),
             ready: nalgebra::Vector3::zeros(),
             obs: Vec::new(),
@@ -191,15 +204,7 @@ impl Env {
         let (serve_seed, planner_seed) = crate::seeds::episode_seeds(seed, 0);
         let mut rng = Rng::seeded(serve_seed);
         match self.bank.as_ref().and_then(|b| b.draw(&mut rng)) {
-            Some(ball) => self.episode.reset_with(
-                sim::serve::Serve {
-                    ball,
-                    server: Side::B,
-                    receiver: Side::A,
-                    predicted_crossing: None,
-                },
-                None,
-            ),
+            Some(ball) => self.episode.reset_with(banked_serve(ball), None),
             None => self.episode.reset(self.kind, &mut rng, None),
         }
         // Drawn after the serve, so that an episode without a lead-in is served as before.
@@ -207,6 +212,8 @@ impl Env {
             let cut = self.lead_in_length == LeadInLength::Spread;
             self.episode.draw_lead_in(&mut rng, cut);
         }
+        self.serve_rng = rng;
+        self.returns = 0;
         self.ready = self.episode.robot.paddle.pose.pos;
         self.observer.reset(planner_seed);
         if self.noise.action > 0.0 || self.noise.activation > 0.0 {
@@ -226,6 +233,23 @@ impl Env {
         self.observer.update_command(robot, &ball, t);
         self.observer.observe(robot, &ball, t, &mut self.obs);
         self.obs.clone()
+    }
+
+    /// Returns judged legal in this episode so far: its ball's (see [`Env::success`]) and, with
+    /// follow-ons, the earlier balls'.
+    pub fn returns(&self) -> u32 {
+        self.returns + self.success() as u32
+    }
+
+    /// The next serve of a follow-on, drawn from the episode's serve stream as a reset draws its
+    /// first (the bank's share from the bank, else `kind`; a P2 serve's paddle and friction stay
+    /// the episode's).
+    fn next_serve(&mut self) -> sim::serve::Serve {
+        let rng = &mut self.serve_rng;
+        match self.bank.as_ref().and_then(|b| b.draw(rng)) {
+            Some(ball) => banked_serve(ball),
+            None => sim::serve::generate(self.kind, rng, &self.bounce),
+        }
     }
 
     /// Whether the return of this episode is judged legal: by the rules once the ball landed, or, in
@@ -303,7 +327,25 @@ impl Env {
             let missed =
                 !self.episode.hit && strike_time.is_some_and(|t_hit| t > t_hit + MISS_GRACE);
             done |= judged || missed;
+            // A judged stroke whose ball is still in play: with the follow-on's share, a next
+            // serve instead of the end (drawn only with follow-ons, so that runs without are
+            // served as before).
+            if judged
+                && !report.done
+                && self.episode.hit
+                && self.follow_on > 0.0
+                && self.serve_rng.unit() < self.follow_on
+            {
+                self.returns += self.predicted_success as u32;
+                let serve = self.next_serve();
+                self.episode.follow_on(serve);
+                self.observer.clear_command();
+                self.stroke = StrokeReward::default();
+                self.predicted_success = false;
+                done = false;
+            }
         }
+        let robot = &self.episode.robot;
         self.observer.update_command(robot, &ball, t);
         self.observer.observe(robot, &ball, t, &mut self.obs);
         Transition {
@@ -314,5 +356,110 @@ impl Env {
             hit: self.episode.hit,
             success: self.success(),
         }
+    }
+}
+
+/// A ball from the bank as the serve of robot B to robot A.
+fn banked_serve(ball: sim::BallState) -> sim::serve::Serve {
+    sim::serve::Serve {
+        ball,
+        server: Side::B,
+        receiver: Side::A,
+        predicted_crossing: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ppo::trainer::envs::{make_env, TrainingEnv};
+    use crate::ppo::{Method, TrainConfig};
+
+    fn env(follow_on: f64) -> Box<Env> {
+        let m = std::sync::Arc::new(sim::config::default_model());
+        let config = TrainConfig {
+            follow_on,
+            ..TrainConfig::default()
+        };
+        let controller = config.controller(Method::Kmac, &m);
+        let arena = sim::config::ArenaConfig::default();
+        match make_env(&m, &arena, &controller, &config, None).unwrap() {
+            (TrainingEnv::Single(env), ..) => env,
+            _ => unreachable!("the default environment is the single serve"),
+        }
+    }
+
+    /// Puts `e` one control step before its stroke is judged: the robot touched the ball a moment
+    /// ago and it flies back over A's half towards B, high enough to clear the net and land on
+    /// B's half by our rules.
+    fn struck(e: &mut Env) {
+        let ball = &mut e.episode.world.ball;
+        ball.pos = nalgebra::Vector3::new(0.5, arena::TABLE_CENTER_Y, arena::TABLE_TOP_Z + 0.4);
+        ball.vel = nalgebra::Vector3::new(-3.5, 0.0, 1.0);
+        ball.spin = nalgebra::Vector3::zeros();
+        e.episode.hit = true;
+        e.stroke.since_contact = Some(reward::TASK_DELAY_STEPS - 1);
+    }
+
+    #[test]
+    fn a_follow_on_goes_on_after_the_judged_stroke_with_the_return_away_then_a_next_serve() {
+        let zero = |e: &Env| vec![0.0; e.action_dim()];
+        for seed in 0..3 {
+            // Without follow-ons the judged stroke ends a training episode.
+            let mut plain = env(0.0);
+            plain.reset(seed);
+            struck(&mut plain);
+            let tr = plain.step(&zero(&plain));
+            assert!(tr.done && tr.hit && tr.success && plain.returns() == 1);
+
+            let mut e = env(1.0);
+            e.reset(seed);
+            let first = e.episode.serve;
+            struck(&mut e);
+            let tr = e.step(&zero(&e));
+            assert!(tr.terms.landing > 0.0, "the stroke is paid: {:?}", tr.terms);
+            assert!(!tr.done && !tr.hit && !tr.success, "seed {seed}: {tr:?}");
+            assert!(e.episode.in_lead_in() && e.observer.command().is_none());
+            assert_eq!(e.returns(), 1, "the legal return is counted");
+            assert_ne!(e.episode.serve, first, "a next serve is drawn");
+            let next = e.episode.serve;
+            let mut away = 0;
+            while e.episode.in_lead_in() {
+                let tr = e.step(&zero(&e));
+                away += 1;
+                assert!(!tr.done && !tr.hit, "seed {seed}, step {away}");
+                assert!(tr.terms.ready > 0.0, "{:?}", tr.terms);
+                assert_eq!((tr.terms.hit, tr.terms.landing), (0.0, 0.0));
+            }
+            assert!(away > 5, "seed {seed}: the return flew {away} steps");
+            assert_eq!(e.episode.world.ball.pos, next.ball.pos);
+            // The next ball is planned for and played out as any other; unreturned, it ends the
+            // episode with the earlier return still counted.
+            let mut tr = e.step(&zero(&e));
+            assert!(e.observer.command().is_some() && tr.terms.ready == 0.0);
+            while !tr.done {
+                tr = e.step(&zero(&e));
+            }
+            assert!(!tr.hit && !tr.success && e.returns() == 1);
+        }
+    }
+
+    #[test]
+    fn episodes_without_a_stroke_are_the_same_with_and_without_follow_ons() {
+        let (mut plain, mut with) = (env(0.0), env(0.7));
+        for seed in 0..3 {
+            assert_eq!(plain.reset(seed), with.reset(seed));
+            loop {
+                let (a, b) = (plain.step(&zero_of(&plain)), with.step(&zero_of(&with)));
+                assert_eq!(a, b, "seed {seed}");
+                if a.done {
+                    break;
+                }
+            }
+        }
+    }
+
+    fn zero_of(e: &Env) -> Vec<f64> {
+        vec![0.0; e.action_dim()]
     }
 }

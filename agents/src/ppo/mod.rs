@@ -460,6 +460,12 @@ pub struct TrainConfig {
     /// plane) or `spread` (cut after a uniform share of that).
     #[serde(skip_serializing_if = "is_full")]
     pub lead_in_length: crate::env::single::LeadInLength,
+    /// Share of judged strokes in single serves that a next serve follows, in [0, 1] (ours, for
+    /// rallies; see [`crate::env::Env::follow_on`]): the episode goes on, its return flying away
+    /// and the `ready` term paid, until the next ball comes to the robot as its stroke left it.
+    /// 0 (the default): none. The checkpoint records it.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub follow_on: f64,
 }
 
 fn is_full(l: &crate::env::single::LeadInLength) -> bool {
@@ -541,7 +547,7 @@ impl TrainConfig {
     /// Refuses settings PPO cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), String> {
         let p = &self.ppo;
-        let checks: [(&str, bool); 21] = [
+        let checks: [(&str, bool); 22] = [
             ("ppo.envs", p.envs >= 1),
             ("ppo.steps_per_env", p.steps_per_env >= 1),
             ("ppo.epochs", p.epochs >= 1),
@@ -586,6 +592,7 @@ impl TrainConfig {
             ),
             ("bank.fraction", (0.0..=1.0).contains(&self.bank.fraction)),
             ("lead_in", (0.0..=1.0).contains(&self.lead_in)),
+            ("follow_on", (0.0..=1.0).contains(&self.follow_on)),
             (
                 "bank.refresh_every",
                 self.bank
@@ -634,6 +641,13 @@ impl TrainConfig {
             return Err(
                 "lead_in: a lead-in is for single serves; in the rally environment the robot's \
                  own returns fly away by themselves"
+                    .into(),
+            );
+        }
+        if self.env == TrainEnv::Rally && self.follow_on > 0.0 {
+            return Err(
+                "follow_on: a follow-on is for single serves; in the rally environment the next \
+                 ball comes by itself"
                     .into(),
             );
         }

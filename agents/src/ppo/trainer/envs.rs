@@ -95,7 +95,7 @@ impl TrainingEnv {
                     time_limit,
                     hit: tr.hit,
                     success: tr.success,
-                    rally_length: tr.success as u32,
+                    rally_length: env.returns(),
                     dual: 0.0,
                     tracking,
                     activation: tr.terms.effort,
@@ -174,6 +174,7 @@ pub fn make_env(
             env.bank = bank.cloned();
             env.lead_in = config.lead_in;
             env.lead_in_length = config.lead_in_length;
+            env.follow_on = config.follow_on;
             let (o, a) = (env.obs_dim(), env.action_dim());
             (TrainingEnv::Single(Box::new(env)), o, a)
         }

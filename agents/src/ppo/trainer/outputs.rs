@@ -189,6 +189,7 @@ impl Trainer {
                 lead_in_length: (self.config.lead_in > 0.0
                     && self.config.lead_in_length != crate::env::single::LeadInLength::Full)
                     .then_some(self.config.lead_in_length),
+                follow_on: (self.config.follow_on > 0.0).then_some(self.config.follow_on),
             }),
             expected_activation_noise: false,
         })
