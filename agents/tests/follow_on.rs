@@ -33,7 +33,8 @@ fn step(env: &mut SingleServe, player: &mut dyn agents::player::Player, ctrl: &m
 }
 
 #[test]
-fn after_a_real_stroke_the_return_flies_away_unjudged_and_the_next_serve_finds_the_robot_as_it_is() {
+fn after_a_real_stroke_the_return_flies_away_unjudged_and_the_next_serve_finds_the_robot_as_it_is()
+{
     let m = model();
     let kind = ServeKind::Stroke { server: Side::B };
     let bounce = sim::predict::BounceModel::for_table(&MYOCHALLENGE.table);
@@ -89,7 +90,10 @@ fn after_a_real_stroke_the_return_flies_away_unjudged_and_the_next_serve_finds_t
     // The scripted agent closes its loop on the plan, so it strikes again from where its stroke
     // left it.
     assert!(followed >= 4, "{followed} of 10 strokes followed on");
-    assert!(second_hits >= 2, "{second_hits} of {followed} next balls hit");
+    assert!(
+        second_hits >= 2,
+        "{second_hits} of {followed} next balls hit"
+    );
 }
 
 #[test]

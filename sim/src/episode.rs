@@ -213,7 +213,10 @@ impl SingleServe {
     /// stroke left it, for a full episode's time. The referee, `hit` and `success` start over
     /// with the new ball; the paddle's mass and the ball's friction stay the episode's.
     pub fn follow_on(&mut self, serve: Serve) {
-        debug_assert!(!self.done && !self.lead_in, "a follow-on comes after a stroke");
+        debug_assert!(
+            !self.done && !self.lead_in,
+            "a follow-on comes after a stroke"
+        );
         self.referee = Referee::new(serve.server);
         self.serve = serve;
         self.hit = false;
