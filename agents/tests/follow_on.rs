@@ -1,6 +1,6 @@
-//! Follow-on serves (`follow_on` of the training configuration): after a stroke, the robot's own
-//! return flies away unjudged and a next serve comes to the robot as its stroke left it, so that
-//! single-serve training sees the moment between two strokes of a rally; the configuration refuses
+//! Follow-on serves (`follow_on` of the training configuration): after a legal return, the robot's
+//! own return flies away unjudged and a next serve comes to the robot as its stroke left it, so
+//! that single-serve training sees the moment between two strokes of a rally; the configuration refuses
 //! a share outside [0, 1] and follow-ons in the rally environment, naming the field; the checkpoint
 //! records it. (The environment's side is tested beside it, in `env::single`.)
 

@@ -211,7 +211,8 @@ impl SingleServe {
     /// and once it reaches B's hitting plane (or falls below the table, or no longer flies away,
     /// or after [`LEAD_IN_STEPS`]) `serve` comes into play from its start, the robot as its own
     /// stroke left it, for a full episode's time. The referee, `hit` and `success` start over
-    /// with the new ball; the paddle's mass and the ball's friction stay the episode's.
+    /// with the new ball, the elapsed share (see [`SingleServe::elapsed_share`]) over from here;
+    /// the paddle's mass and the ball's friction stay the episode's.
     pub fn follow_on(&mut self, serve: Serve) {
         debug_assert!(
             !self.done && !self.lead_in,
@@ -222,6 +223,7 @@ impl SingleServe {
         self.hit = false;
         self.success = false;
         self.lead_in = true;
+        self.serve_step = self.steps;
         self.lead_in_until = self.steps + LEAD_IN_STEPS;
         self.max_steps = self.lead_in_until + arena::EPISODE_STEPS;
     }

@@ -129,8 +129,10 @@ pub fn git_commit() -> String {
     env!("RALLY_GIT_COMMIT").to_string()
 }
 
-fn status_line(r: &CurveRow, steps_per_s: f64, env: TrainEnv) -> String {
+/// One progress line; `follow_ons` adds a single-serve run's legal returns per episode.
+fn status_line(r: &CurveRow, steps_per_s: f64, env: TrainEnv, follow_ons: bool) -> String {
     let rally = match env {
+        TrainEnv::Single if follow_ons => format!("  returns {:.2}", r.rally_length),
         TrainEnv::Single => String::new(),
         TrainEnv::Rally => format!("  rally {:.2}  in box {:.2}", r.rally_length, r.dual),
     };
@@ -435,7 +437,12 @@ fn train(
         let row = trainer.iterate().map_err(|e| anyhow!(e))?;
         let rate = (row.env_steps - first_steps) as f64 / started.elapsed().as_secs_f64();
         bar.set_position(row.env_steps.min(args.steps));
-        bar.set_message(status_line(&row, rate, trainer.config.env));
+        bar.set_message(status_line(
+            &row,
+            rate,
+            trainer.config.env,
+            trainer.config.follow_on > 0.0,
+        ));
         let v_every = trainer.config.validation.every as u64;
         if v_every > 0 && row.iteration.is_multiple_of(v_every) {
             validate(out, trainer, bar)?;
@@ -457,7 +464,12 @@ fn train(
                     "iteration {} ({} steps): {}",
                     row.iteration,
                     row.env_steps,
-                    status_line(&row, rate, trainer.config.env)
+                    status_line(
+                        &row,
+                        rate,
+                        trainer.config.env,
+                        trainer.config.follow_on > 0.0
+                    )
                 );
             }
         }

@@ -120,10 +120,10 @@ pub struct Training {
     pub iterations: u64,
     /// Training wall time, s.
     pub wall_seconds: f64,
-    /// Hit rate over the last training episodes.
+    /// Hit rate over the last training episodes (with follow-ons, of their last balls).
     pub hit_rate: f64,
     /// Success rate over the last training episodes (a training episode ends 3 steps after the
-    /// hit, so its success is the planner's predicted landing).
+    /// hit, so its success is the planner's predicted landing; with follow-ons, its last ball's).
     pub success_rate: f64,
     /// Episodes those rates are over.
     pub episodes: u64,
@@ -136,7 +136,8 @@ pub struct Training {
     /// The run whose weights this one started from (a warm start), if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub warm_start: Option<String>,
-    /// Mean legal returns per training rally over the last episodes (rally training only).
+    /// Mean legal returns per training rally over the last episodes (rally training; with
+    /// follow-ons, per single-serve episode).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rally_length: Option<f64>,
     /// How this checkpoint was chosen among the ones its run wrote, when it is not the last (e.g.
@@ -158,7 +159,7 @@ pub struct Training {
     /// How long those lead-ins lasted (`lead_in_length`), when not `full`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lead_in_length: Option<crate::env::single::LeadInLength>,
-    /// The share of its judged single-serve strokes that a next serve followed (`follow_on` of the
+    /// The share of its legal single-serve returns that a next serve followed (`follow_on` of the
     /// training configuration); absent: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub follow_on: Option<f64>,

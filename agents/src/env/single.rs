@@ -104,11 +104,12 @@ pub struct Env {
     pub lead_in: f64,
     /// How long a lead-in lasts.
     pub lead_in_length: LeadInLength,
-    /// Share of strokes, in [0, 1], that a next serve follows (ours, for rallies; training's
-    /// episode end only): when the stroke is judged ([`EpisodeEnd::Training`]) and the ball is
-    /// still in play, the episode goes on instead of ending — the return flies away unjudged, the
-    /// `ready` term paid meanwhile, and a next serve from the same distribution comes to the robot
-    /// as its stroke left it (see [`sim::episode::SingleServe::follow_on`]). 0: none (the default).
+    /// Share of legal returns, in [0, 1], that a next serve follows (ours, for rallies; training's
+    /// episode end only): when a stroke is judged ([`EpisodeEnd::Training`]) a legal return and
+    /// the ball is still in play, the episode goes on instead of ending — the return flies away
+    /// unjudged, the `ready` term paid meanwhile, and a next serve from the same distribution
+    /// comes to the robot as its stroke left it (see [`sim::episode::SingleServe::follow_on`]), as
+    /// a rally brings the next ball only after a legal return. 0: none (the default).
     pub follow_on: f64,
     /// The episode's serve stream after the reset's draws: the follow-ons' serves.
     serve_rng: Rng,
@@ -327,16 +328,16 @@ impl Env {
             let missed =
                 !self.episode.hit && strike_time.is_some_and(|t_hit| t > t_hit + MISS_GRACE);
             done |= judged || missed;
-            // A judged stroke whose ball is still in play: with the follow-on's share, a next
+            // A legal return whose ball is still in play: with the follow-on's share, a next
             // serve instead of the end (drawn only with follow-ons, so that runs without are
             // served as before).
             if judged
+                && self.predicted_success
                 && !report.done
-                && self.episode.hit
                 && self.follow_on > 0.0
                 && self.serve_rng.unit() < self.follow_on
             {
-                self.returns += self.predicted_success as u32;
+                self.returns += 1;
                 let serve = self.next_serve();
                 self.episode.follow_on(serve);
                 self.observer.clear_command();
@@ -389,33 +390,49 @@ mod tests {
         }
     }
 
+    fn zero(e: &Env) -> Vec<f64> {
+        vec![0.0; e.action_dim()]
+    }
+
     /// Puts `e` one control step before its stroke is judged: the robot touched the ball a moment
-    /// ago and it flies back over A's half towards B, high enough to clear the net and land on
-    /// B's half by our rules.
-    fn struck(e: &mut Env) {
+    /// ago and it flies back over A's half towards B at `vz` upwards (1 m/s: over the net and onto
+    /// B's half by our rules; −1: into A's own half, a fault).
+    fn struck(e: &mut Env, vz: f64) {
         let ball = &mut e.episode.world.ball;
         ball.pos = nalgebra::Vector3::new(0.5, arena::TABLE_CENTER_Y, arena::TABLE_TOP_Z + 0.4);
-        ball.vel = nalgebra::Vector3::new(-3.5, 0.0, 1.0);
+        ball.vel = nalgebra::Vector3::new(-3.5, 0.0, vz);
         ball.spin = nalgebra::Vector3::zeros();
         e.episode.hit = true;
         e.stroke.since_contact = Some(reward::TASK_DELAY_STEPS - 1);
     }
 
+    /// Steps `e` through a follow-on's lead-in, checking what it pays; returns its length.
+    fn lead_in(e: &mut Env) -> usize {
+        let mut away = 0;
+        while e.episode.in_lead_in() {
+            let tr = e.step(&zero(e));
+            away += 1;
+            assert!(!tr.done && !tr.hit, "step {away}");
+            assert!(tr.terms.ready > 0.0, "{:?}", tr.terms);
+            assert_eq!((tr.terms.hit, tr.terms.landing), (0.0, 0.0));
+        }
+        away
+    }
+
     #[test]
-    fn a_follow_on_goes_on_after_the_judged_stroke_with_the_return_away_then_a_next_serve() {
-        let zero = |e: &Env| vec![0.0; e.action_dim()];
+    fn a_legal_return_goes_on_to_a_next_serve_after_the_return_flew_away() {
         for seed in 0..3 {
             // Without follow-ons the judged stroke ends a training episode.
             let mut plain = env(0.0);
             plain.reset(seed);
-            struck(&mut plain);
+            struck(&mut plain, 1.0);
             let tr = plain.step(&zero(&plain));
             assert!(tr.done && tr.hit && tr.success && plain.returns() == 1);
 
             let mut e = env(1.0);
             e.reset(seed);
             let first = e.episode.serve;
-            struck(&mut e);
+            struck(&mut e, 1.0);
             let tr = e.step(&zero(&e));
             assert!(tr.terms.landing > 0.0, "the stroke is paid: {:?}", tr.terms);
             assert!(!tr.done && !tr.hit && !tr.success, "seed {seed}: {tr:?}");
@@ -423,43 +440,72 @@ mod tests {
             assert_eq!(e.returns(), 1, "the legal return is counted");
             assert_ne!(e.episode.serve, first, "a next serve is drawn");
             let next = e.episode.serve;
-            let mut away = 0;
-            while e.episode.in_lead_in() {
-                let tr = e.step(&zero(&e));
-                away += 1;
-                assert!(!tr.done && !tr.hit, "seed {seed}, step {away}");
-                assert!(tr.terms.ready > 0.0, "{:?}", tr.terms);
-                assert_eq!((tr.terms.hit, tr.terms.landing), (0.0, 0.0));
-            }
+            let away = lead_in(&mut e);
             assert!(away > 5, "seed {seed}: the return flew {away} steps");
             assert_eq!(e.episode.world.ball.pos, next.ball.pos);
-            // The next ball is planned for and played out as any other; unreturned, it ends the
-            // episode with the earlier return still counted.
-            let mut tr = e.step(&zero(&e));
+            assert_eq!(
+                e.episode.elapsed_share(),
+                0.0,
+                "the next serve's time starts"
+            );
+            // The next ball is planned for and its stroke paid as the first's: a second legal
+            // return follows on again.
+            let tr = e.step(&zero(&e));
             assert!(e.observer.command().is_some() && tr.terms.ready == 0.0);
+            struck(&mut e, 1.0);
+            let tr = e.step(&zero(&e));
+            assert!(tr.terms.landing > 0.0 && !tr.done, "{:?}", tr.terms);
+            assert_eq!(e.returns(), 2);
+            assert_ne!(e.episode.serve, next);
+            lead_in(&mut e);
+            // Unreturned, the third ends the episode with the earlier returns still counted.
+            let mut tr = e.step(&zero(&e));
             while !tr.done {
                 tr = e.step(&zero(&e));
             }
-            assert!(!tr.hit && !tr.success && e.returns() == 1);
+            assert!(!tr.hit && !tr.success && e.returns() == 2);
         }
     }
 
     #[test]
-    fn episodes_without_a_stroke_are_the_same_with_and_without_follow_ons() {
-        let (mut plain, mut with) = (env(0.0), env(0.7));
+    fn a_fault_ends_the_episode_as_without_follow_ons() {
+        let mut e = env(1.0);
+        e.reset(4);
+        struck(&mut e, -1.0);
+        let tr = e.step(&zero(&e));
+        assert!(
+            tr.terms.fault > 0.0 && tr.terms.landing == 0.0,
+            "{:?}",
+            tr.terms
+        );
+        assert!(tr.done && !tr.success && e.returns() == 0);
+        assert!(!e.episode.in_lead_in());
+    }
+
+    #[test]
+    fn follow_ons_drawn_and_declined_change_nothing_and_the_same_seed_draws_the_same_next_serve() {
+        // A share so small that it draws and never follows on: every step as without the setting.
+        let (mut plain, mut drawn) = (env(0.0), env(1e-300));
         for seed in 0..3 {
-            assert_eq!(plain.reset(seed), with.reset(seed));
+            assert_eq!(plain.reset(seed), drawn.reset(seed));
+            struck(&mut plain, 1.0);
+            struck(&mut drawn, 1.0);
             loop {
-                let (a, b) = (plain.step(&zero_of(&plain)), with.step(&zero_of(&with)));
+                let (a, b) = (plain.step(&zero(&plain)), drawn.step(&zero(&drawn)));
                 assert_eq!(a, b, "seed {seed}");
                 if a.done {
                     break;
                 }
             }
         }
-    }
-
-    fn zero_of(e: &Env) -> Vec<f64> {
-        vec![0.0; e.action_dim()]
+        let serve = |seed| {
+            let mut e = env(1.0);
+            e.reset(seed);
+            struck(&mut e, 1.0);
+            e.step(&zero(&e));
+            e.episode.serve
+        };
+        assert_eq!(serve(7), serve(7));
+        assert_ne!(serve(7), serve(8));
     }
 }

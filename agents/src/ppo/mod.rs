@@ -460,7 +460,7 @@ pub struct TrainConfig {
     /// plane) or `spread` (cut after a uniform share of that).
     #[serde(skip_serializing_if = "is_full")]
     pub lead_in_length: crate::env::single::LeadInLength,
-    /// Share of judged strokes in single serves that a next serve follows, in [0, 1] (ours, for
+    /// Share of legal returns in single serves that a next serve follows, in [0, 1] (ours, for
     /// rallies; see [`crate::env::Env::follow_on`]): the episode goes on, its return flying away
     /// and the `ready` term paid, until the next ball comes to the robot as its stroke left it.
     /// 0 (the default): none. The checkpoint records it.

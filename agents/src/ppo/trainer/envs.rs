@@ -29,7 +29,8 @@ pub struct AgentStep {
     pub hit: bool,
     /// A legal return (so far; in a rally: by this robot in this step).
     pub success: bool,
-    /// Returns in the rally so far (single serve: 1 after a success).
+    /// Returns in the rally so far (single serve: the episode's legal returns, more than 1 only
+    /// with follow-ons).
     pub rally_length: u32,
     /// The rally's dual term of this step.
     pub dual: f64,

@@ -181,7 +181,8 @@ impl Trainer {
                 curve,
                 env: self.config.env.name().into(),
                 warm_start: self.progress.warm_start.clone(),
-                rally_length: (self.config.env == TrainEnv::Rally).then_some(last.rally_length),
+                rally_length: (self.config.env == TrainEnv::Rally || self.config.follow_on > 0.0)
+                    .then_some(last.rally_length),
                 note: None,
                 noise_scale: None,
                 ablation: (!self.config.ablation.is_none()).then_some(self.config.ablation),
