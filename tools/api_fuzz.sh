@@ -4,6 +4,9 @@
 # checks: no 5xx, every status code, content type, header and body as the document says. The two
 # server-sent-event streams (/events, /matches/{id}/live) never end and are left out.
 # Usage: tools/api_fuzz.sh RALLY_BINARY SCHEMATHESIS [SECONDS]
+# One schemathesis worker: with two threads, hypothesis's ast.parse (it describes lambdas by their
+# source) raised CPython 3.11's "SystemError: AST constructor recursion depth mismatch" once in CI, an
+# error of the tool and not of the API that still failed the run.
 # RALLY_TEST_DB, if set, is the server's store instead of a scratch SQLite file (an empty PostgreSQL
 # database's URL: CI fuzzes both engines).
 set -euo pipefail
@@ -35,5 +38,5 @@ addr="$(sed -n 's/^listening on //p' "$dir/out")"
 [ -n "$addr" ] || { cat "$dir/err"; echo "rally serve did not start"; exit 1; }
 "$st" run "$addr/api/v1/openapi.json" \
   --checks not_a_server_error,status_code_conformance,content_type_conformance,response_schema_conformance,response_headers_conformance \
-  --max-time "$seconds" -w 2 -H "Authorization: Bearer api-fuzz-token" \
+  --max-time "$seconds" -w 1 -H "Authorization: Bearer api-fuzz-token" \
   --exclude-path-regex 'events|live' --seed 1
