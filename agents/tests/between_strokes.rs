@@ -1,8 +1,11 @@
-//! The single-serve environment's lead-in (`lead_in` of the training configuration): in that share
-//! of episodes the robot's own return flies away first, unjudged, with the `ready` term paid and no
-//! stroke term, then the episode's serve comes; the draw comes after the serve's, so the other
-//! episodes are served exactly as without it; the configuration refuses a share outside [0, 1] and a
-//! lead-in in the rally environment, naming the field; the checkpoint records it.
+//! The moment between two strokes of a rally, in single serves. Lead-ins (`lead_in` of the training
+//! configuration): in that share of episodes the robot's own return flies away first, unjudged, with
+//! the `ready` term paid and no stroke term, then the episode's serve comes; the draw comes after the
+//! serve's, so the other episodes are served exactly as without it. Follow-ons (`follow_on`): after a
+//! legal return, the return flies away unjudged and a next serve comes to the robot as its stroke left
+//! it (the environment's side is tested beside it, in `env::single`). The configuration refuses a
+//! share outside [0, 1] and either in the rally environment, naming the field; the checkpoint records
+//! both.
 
 use std::sync::Arc;
 
@@ -10,7 +13,11 @@ use agents::env::single::{Env, LeadInLength};
 use agents::ppo::trainer::envs::{make_env, TrainingEnv};
 use agents::ppo::trainer::Trainer;
 use agents::ppo::{Method, TrainConfig, TrainEnv};
+use sim::arena::{Side, MYOCHALLENGE};
 use sim::config::ArenaConfig;
+use sim::episode::SingleServe;
+use sim::rng::Rng;
+use sim::serve::ServeKind;
 
 fn model() -> Arc<sim::model::Model> {
     Arc::new(sim::config::default_model())
@@ -32,6 +39,27 @@ fn env_with(lead_in: f64, lead_in_length: LeadInLength) -> Box<Env> {
         (TrainingEnv::Single(env), ..) => env,
         _ => unreachable!("the default environment is the single serve"),
     }
+}
+
+/// The rally environment's configuration, without the training noise it refuses.
+fn rally_config() -> TrainConfig {
+    let mut c = TrainConfig {
+        env: TrainEnv::Rally,
+        ..TrainConfig::default()
+    };
+    c.controller.action_noise = 0.0;
+    c.controller.activation_noise = 0.0;
+    c
+}
+
+/// The checkpoint of one small training iteration under `c`.
+fn one_iteration(mut c: TrainConfig) -> agents::checkpoint::Checkpoint {
+    c.ppo.envs = 2;
+    c.ppo.steps_per_env = 8;
+    c.ppo.hidden = vec![16];
+    let mut t = Trainer::new(model(), Method::Kmac, c, 3).unwrap();
+    t.iterate().unwrap();
+    t.checkpoint("probe", "test", "none").unwrap()
 }
 
 #[test]
@@ -126,7 +154,7 @@ fn episodes_without_a_lead_in_are_served_as_without_the_setting() {
 }
 
 #[test]
-fn the_configuration_checks_the_share_and_the_checkpoint_records_it() {
+fn the_configuration_checks_the_lead_in_share_and_the_checkpoint_records_it() {
     for bad in [-0.1, 1.5, f64::NAN] {
         let c = TrainConfig {
             lead_in: bad,
@@ -136,12 +164,8 @@ fn the_configuration_checks_the_share_and_the_checkpoint_records_it() {
     }
     let rally = TrainConfig {
         lead_in: 0.5,
-        env: TrainEnv::Rally,
-        ..TrainConfig::default()
+        ..rally_config()
     };
-    let mut rally = rally;
-    rally.controller.action_noise = 0.0;
-    rally.controller.activation_noise = 0.0;
     assert!(rally.validate().unwrap_err().starts_with("lead_in"));
     let idle = TrainConfig {
         lead_in_length: LeadInLength::Spread,
@@ -156,17 +180,12 @@ fn the_configuration_checks_the_share_and_the_checkpoint_records_it() {
         (0.5, LeadInLength::Full),
         (0.5, LeadInLength::Spread),
     ] {
-        let mut c = TrainConfig {
+        let c = TrainConfig {
             lead_in,
             lead_in_length: length,
             ..TrainConfig::default()
         };
-        c.ppo.envs = 2;
-        c.ppo.steps_per_env = 8;
-        c.ppo.hidden = vec![16];
-        let mut t = Trainer::new(model(), Method::Kmac, c, 3).unwrap();
-        t.iterate().unwrap();
-        let ck = t.checkpoint("probe", "test", "none").unwrap();
+        let ck = one_iteration(c);
         let training = ck.training.as_ref().unwrap();
         assert_eq!(training.lead_in, (lead_in > 0.0).then_some(lead_in));
         let spread = length == LeadInLength::Spread;
@@ -239,5 +258,115 @@ fn an_evaluation_with_a_lead_in_plays_the_same_serves_after_the_robots_own_retur
         assert!(lead > 20, "seed {seed}: {lead}");
         assert_eq!(r.steps, trace.len() - lead, "seed {seed}");
         assert!(r.steps <= sim::arena::EPISODE_STEPS);
+    }
+}
+
+/// One control step of `player` on `env`; whether the paddle touched the ball in it.
+fn step(env: &mut SingleServe, player: &mut dyn agents::player::Player, ctrl: &mut [f64]) -> bool {
+    ctrl.copy_from_slice(&env.robot.state.ctrl);
+    player
+        .act(&env.robot, &env.world.ball, env.world.time, ctrl)
+        .unwrap();
+    env.robot.state.ctrl.copy_from_slice(ctrl);
+    let report = env.step();
+    report
+        .events
+        .iter()
+        .any(|e| e.kind == sim::ContactKind::Paddle { owner: Side::A })
+}
+
+#[test]
+fn after_a_real_stroke_the_return_flies_away_unjudged_and_the_next_serve_finds_the_robot_as_it_is()
+{
+    let m = model();
+    let kind = ServeKind::Stroke { server: Side::B };
+    let bounce = sim::predict::BounceModel::for_table(&MYOCHALLENGE.table);
+    let mut env = SingleServe::new(m.clone(), &ArenaConfig::default(), MYOCHALLENGE).unwrap();
+    let spec = agents::factory::PlayerSpec::scripted("scripted").unwrap();
+    let mut player = spec.build(&m, &MYOCHALLENGE, 0).unwrap();
+    let mut ctrl = vec![0.0; m.actuators.len()];
+    let mut rng = Rng::seeded(21);
+    let (mut followed, mut second_hits) = (0, 0);
+    for _ in 0..10 {
+        env.reset(kind, &mut rng, None);
+        player.reset();
+        // Play the serve until the ball left the paddle three control steps ago (the training
+        // episode's judgement).
+        let mut since: Option<usize> = None;
+        while !env.done && since != Some(3) {
+            if step(&mut env, player.as_mut(), &mut ctrl) {
+                since = Some(0);
+            } else if let Some(k) = since.as_mut() {
+                *k += 1;
+            }
+        }
+        if env.done || Side::A.sign() * env.world.ball.vel.x >= 0.0 {
+            continue;
+        }
+        let next = sim::serve::generate(kind, &mut rng, &bounce);
+        let (qpos, t0, step0) = (env.robot.state.clone(), env.world.time, env.steps);
+        env.follow_on(next);
+        followed += 1;
+        assert!(env.in_lead_in() && !env.hit && !env.success && env.referee.end().is_none());
+        assert_eq!(env.robot.state, qpos, "the robot is left as it is");
+        while env.in_lead_in() {
+            let x = env.world.ball.pos.x;
+            step(&mut env, player.as_mut(), &mut ctrl);
+            assert!(!env.done && !env.hit);
+            if env.in_lead_in() {
+                assert!(env.world.ball.pos.x < x, "the return flies away");
+            }
+        }
+        let away = env.steps - step0;
+        assert!((1..=sim::episode::LEAD_IN_STEPS).contains(&away), "{away}");
+        // The next serve from its start, at the episode's time, with a full episode ahead.
+        assert_eq!(env.world.ball.pos, next.ball.pos);
+        assert_eq!(env.world.ball.vel, next.ball.vel);
+        let dt = away as f64 * sim::arena::CONTROL_DT;
+        assert!((env.world.time - t0 - dt).abs() < 1e-9);
+        assert_eq!(env.max_steps, env.steps + sim::arena::EPISODE_STEPS);
+        while !env.done {
+            step(&mut env, player.as_mut(), &mut ctrl);
+        }
+        second_hits += env.hit as usize;
+    }
+    // The scripted agent closes its loop on the plan, so it strikes again from where its stroke
+    // left it.
+    assert!(followed >= 4, "{followed} of 10 strokes followed on");
+    assert!(
+        second_hits >= 2,
+        "{second_hits} of {followed} next balls hit"
+    );
+}
+
+#[test]
+fn the_configuration_checks_the_follow_on_share_and_the_checkpoint_records_it() {
+    for bad in [-0.1, 1.5, f64::NAN] {
+        let c = TrainConfig {
+            follow_on: bad,
+            ..TrainConfig::default()
+        };
+        assert!(c.validate().unwrap_err().contains("follow_on"), "{bad}");
+    }
+    let rally = TrainConfig {
+        follow_on: 0.5,
+        ..rally_config()
+    };
+    assert!(rally.validate().unwrap_err().starts_with("follow_on"));
+    let text = toml::to_string(&TrainConfig::default()).unwrap();
+    assert!(!text.contains("follow_on"), "{text}");
+    let parsed: TrainConfig = toml::from_str("follow_on = 0.25").unwrap();
+    assert_eq!(parsed.follow_on, 0.25);
+    for follow_on in [0.0, 0.5] {
+        let ck = one_iteration(TrainConfig {
+            follow_on,
+            ..TrainConfig::default()
+        });
+        let training = ck.training.as_ref().unwrap();
+        assert_eq!(training.follow_on, (follow_on > 0.0).then_some(follow_on));
+        // Its returns per episode are kept, as a rally run's rally length is.
+        assert_eq!(training.rally_length.is_some(), follow_on > 0.0);
+        let json = serde_json::to_string(&ck).unwrap();
+        assert_eq!(json.contains("follow_on"), follow_on > 0.0);
     }
 }
