@@ -210,3 +210,76 @@ fn bad_arguments_exit_2_and_name_what_is_wrong() {
     assert!(!base.join("run/checkpoint.json").exists());
     let _ = std::fs::remove_dir_all(&base);
 }
+
+#[test]
+fn a_checkpoint_file_starts_a_run_that_keeps_its_policy_while_the_critic_warms_up() {
+    let base = tmp("from-file");
+    let cfg = config(&base);
+    let cfg = cfg.to_str().unwrap();
+    let a = base.join("a");
+    let out = rally(&train_args("256", "1", cfg, &a, &[]));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let ck = a.join("checkpoint.json");
+    let ck = ck.to_str().unwrap();
+    let b = base.join("b");
+    // A checkpoint holds no critic and no optimiser: the run must say how long the critic warms
+    // up, and cannot carry an optimiser; nothing is written.
+    let out = rally(&train_args("256", "2", cfg, &b, &["--init", ck]));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--critic-warmup"));
+    let out = rally(&train_args(
+        "256",
+        "2",
+        cfg,
+        &b,
+        &[
+            "--init",
+            ck,
+            "--critic-warmup",
+            "2",
+            "--init-optimizer",
+            "carry",
+        ],
+    ));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no optimiser"));
+    assert!(!b.join("checkpoint.json").exists());
+    // Two iterations of critic warm-up: the policy is the checkpoint's, to the bit.
+    let out = rally(&train_args(
+        "256",
+        "2",
+        cfg,
+        &b,
+        &["--init", ck, "--critic-warmup", "2"],
+    ));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(policy_of(&b).0, policy_of(&a).0);
+    let text = std::fs::read_to_string(b.join("checkpoint.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let warm = v["training"]["warm_start"].as_str().unwrap();
+    assert!(
+        warm.contains("checkpoint.json") && warm.contains("critic"),
+        "{warm}"
+    );
+    // Its warm-up is part of the run: a resume with another is refused.
+    let out = rally(&train_args(
+        "512",
+        "2",
+        cfg,
+        &b,
+        &["--resume", "--critic-warmup", "3"],
+    ));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--critic-warmup 2"));
+    let _ = std::fs::remove_dir_all(&base);
+}

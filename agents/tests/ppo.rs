@@ -716,3 +716,70 @@ fn a_privileged_critic_sees_what_the_policy_does_not_and_only_the_critic_does() 
     let err = rally.validate().unwrap_err();
     assert!(err.contains("ppo.critic"), "{err}");
 }
+
+#[test]
+fn a_checkpoint_file_warm_start_plays_as_the_checkpoint_and_its_critic_learns_alone_first() {
+    // A short run, saved as validation saves best.json (at half its σ).
+    let mut cfg = small(4, 8, 10);
+    cfg.validation.noise_scale = 0.5;
+    let mut a = Trainer::new(model(), Method::Kmac, cfg.clone(), 5).unwrap();
+    for _ in 0..2 {
+        a.iterate().unwrap();
+    }
+    let ck = a.validation_checkpoint("a", "", "").unwrap();
+    let trained = a.checkpoint("a", "", "").unwrap();
+    // Another seed's run, from it: the policy, its trained σ and the observation statistics.
+    cfg.ppo.critic_warmup = 2;
+    let mut b = Trainer::new(model(), Method::Kmac, cfg.clone(), 6).unwrap();
+    b.warm_start_from_checkpoint(&ck, "a.json").unwrap();
+    let start = b.checkpoint("b", "", "").unwrap();
+    assert_eq!(start.policy, trained.policy);
+    assert_eq!(start.observation.mean, trained.observation.mean);
+    for (x, y) in start.observation.std.iter().zip(&trained.observation.std) {
+        assert!((x - y).abs() < 1e-12, "{x} vs {y}");
+    }
+    for (x, y) in start
+        .policy_std
+        .unwrap()
+        .iter()
+        .zip(trained.policy_std.unwrap())
+    {
+        assert!((x / y - 1.0).abs() < 1e-6, "σ {x} vs trained {y}");
+    }
+    assert!(b.progress.warm_start.as_deref().unwrap().contains("a.json"));
+    // Its first two iterations move the critic only; the third the policy too.
+    let actor = |t: &Trainer| {
+        let w = weights(t);
+        let n = 2 * t.net.actor.len();
+        (w[..n].to_vec(), w.last().unwrap().clone())
+    };
+    let critic = |t: &Trainer| {
+        let w = weights(t);
+        w[2 * t.net.actor.len()..w.len() - 1].to_vec()
+    };
+    let (policy0, critic0) = (actor(&b), critic(&b));
+    for _ in 0..2 {
+        b.iterate().unwrap();
+    }
+    assert_eq!(
+        actor(&b),
+        policy0,
+        "the policy and σ keep still while the critic warms up"
+    );
+    assert_ne!(critic(&b), critic0, "the critic learns");
+    b.iterate().unwrap();
+    assert_ne!(
+        actor(&b).0,
+        policy0.0,
+        "after the warm-up the policy learns"
+    );
+    // What does not fit is refused, naming why.
+    let mut other = small(4, 8, 10);
+    other.ppo.hidden = vec![16, 16];
+    let mut c = Trainer::new(model(), Method::Kmac, other, 6).unwrap();
+    let err = c.warm_start_from_checkpoint(&ck, "a.json").unwrap_err();
+    assert!(err.contains("ppo.hidden"), "{err}");
+    let mut d = Trainer::new(model(), Method::Muscle, small(4, 8, 10), 6).unwrap();
+    let err = d.warm_start_from_checkpoint(&ck, "a.json").unwrap_err();
+    assert!(err.contains("kmac"), "{err}");
+}

@@ -20,6 +20,7 @@ use super::CliError;
     rally train --method kmac --steps 2000000 --seed 1 --out runs/kmac\n  \
     rally train --method kmac --steps 4000000 --seed 1 --out runs/kmac --resume   (continue, or extend)\n  \
     rally train --method kmac --env rally --init runs/kmac --steps 4000000 --seed 2 --out runs/kmac-rally\n  \
+    rally train --method kmac --init config/checkpoints/kmac.json --critic-warmup 20 --steps 2e6 --seed 3 --out runs/kmac-more\n  \
     rally plot runs/kmac runs/muscle --out curves.png\n\n\
     Writes OUT/checkpoint.json (the agents' checkpoint format: rally eval OUT/checkpoint.json),\n\
     OUT/curve.csv, OUT/curve.png and OUT/resume/ (what --resume reads). With [validation] every = K\n\
@@ -44,13 +45,22 @@ pub struct TrainArgs {
     /// of the run in this directory (a warm start, e.g. --env rally --init runs/kmac); the counters
     /// and the curve start fresh. What it reads is the run's resumable state (DIR/resume/), saved
     /// every `checkpoint_every` iterations: a run that ended between two is taken from the last.
+    /// Or start from a checkpoint file (a committed one, say) of the same method, controller and
+    /// observation: its policy, σ and observation statistics; critic and optimiser fresh, so give
+    /// --critic-warmup too.
     #[arg(long, conflicts_with = "resume")]
     init: Option<PathBuf>,
-    /// With --init: carry the start's optimiser (moments and learning rate, as rsl_rl loads one) or
-    /// start a fresh one at the configured learning rate, whose first update moves a trained policy
-    /// far (how the committed runs before 2026-12-02 were made; re-make them with `fresh`).
-    #[arg(long, value_enum, default_value = "carry", requires = "init")]
-    init_optimizer: InitOptimizer,
+    /// With --init DIR: carry the start's optimiser (moments and learning rate, as rsl_rl loads
+    /// one; the default) or start a fresh one at the configured learning rate, whose first update
+    /// moves a trained policy far (how the committed runs before 2026-12-02 were made; re-make
+    /// them with `fresh`). A checkpoint file holds no optimiser: its runs start a fresh one.
+    #[arg(long, value_enum, requires = "init")]
+    init_optimizer: Option<InitOptimizer>,
+    /// Iterations at the run's start in which only the critic learns (the policy keeps still):
+    /// ppo.critic_warmup laid over the configuration. Needed with --init FILE, whose critic is
+    /// fresh (e.g. 20; 0 to start the policy's updates at once).
+    #[arg(long)]
+    critic_warmup: Option<u64>,
     /// Control steps to simulate in all (every environment's steps count), e.g. 2000000 or 2e6.
     #[arg(long, value_parser = parse_steps)]
     steps: u64,
@@ -312,6 +322,9 @@ fn configuration(args: &TrainArgs) -> Result<TrainConfig, CliError> {
     if let Some(serve) = args.serve {
         config.serve = serve;
     }
+    if let Some(n) = args.critic_warmup {
+        config.ppo.critic_warmup = n;
+    }
     Ok(config)
 }
 
@@ -350,6 +363,16 @@ fn resume(
             state.config.serve
         )));
     }
+    if let Some(n) = args
+        .critic_warmup
+        .filter(|&n| n != state.config.ppo.critic_warmup)
+    {
+        return Err(CliError::Usage(format!(
+            "--resume: {} was started with --critic-warmup {}, not {n}",
+            args.out.display(),
+            state.config.ppo.critic_warmup
+        )));
+    }
     if args.config.is_some() && state.config != *config {
         return Err(CliError::Usage(format!(
             "--resume: --config differs from the configuration {} was started with",
@@ -382,6 +405,7 @@ fn start(
             args.out.display()
         )));
     }
+    let model = body.model.clone();
     let mut t = Trainer::on(
         body.model,
         body.config,
@@ -391,10 +415,35 @@ fn start(
         args.seed,
     )
     .map_err(|e| anyhow!(e))?;
-    if let Some(init) = &args.init {
-        RunDir::open(init)
-            .and_then(|d| d.warm_start(&mut t, args.init_optimizer.into()))
-            .map_err(|e| CliError::Usage(format!("--init: {e}")))?;
+    match &args.init {
+        Some(init) if init.is_file() => {
+            if args.init_optimizer == Some(InitOptimizer::Carry) {
+                return Err(CliError::Usage(format!(
+                    "--init-optimizer carry: {} is a checkpoint file, which holds no optimiser",
+                    init.display()
+                )));
+            }
+            if args.critic_warmup.is_none() && t.config.ppo.critic_warmup == 0 {
+                return Err(CliError::Usage(format!(
+                    "--init {}: a checkpoint brings a policy but no critic; give --critic-warmup N \
+                     (iterations in which only the fresh critic learns, e.g. 20; 0 for none)",
+                    init.display()
+                )));
+            }
+            let text = std::fs::read_to_string(init)
+                .map_err(|e| CliError::Usage(format!("--init {}: {e}", init.display())))?;
+            let ck = agents::checkpoint::Checkpoint::from_json(&text, &model)
+                .map_err(|e| CliError::Usage(format!("--init {}: {e}", init.display())))?;
+            t.warm_start_from_checkpoint(&ck, &init.display().to_string())
+                .map_err(|e| CliError::Usage(format!("--init: {e}")))?;
+        }
+        Some(init) => {
+            let optimiser = args.init_optimizer.unwrap_or(InitOptimizer::Carry);
+            RunDir::open(init)
+                .and_then(|d| d.warm_start(&mut t, optimiser.into()))
+                .map_err(|e| CliError::Usage(format!("--init: {e}")))?;
+        }
+        None => {}
     }
     Ok(t)
 }
@@ -522,7 +571,7 @@ fn report(args: &TrainArgs, trainer: &Trainer, dir: &RunDir, started: std::time:
 }
 
 /// `--init-optimizer`.
-#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum InitOptimizer {
     /// The start's moments and learning rate.
     Carry,

@@ -213,6 +213,17 @@ pub struct PpoConfig {
     /// What the critic sees (official: the privileged observation; ours by default: the actor's).
     #[serde(skip_serializing_if = "is_actor")]
     pub critic: CriticInput,
+    /// Iterations at the start of a run in which only the critic learns (ours; rsl_rl has none):
+    /// their loss is the value loss alone, so the policy and its σ stay as they started. For a run
+    /// warm-started from a checkpoint file, which brings a policy but no critic: a fresh critic's
+    /// advantages are noise, and the policy's first updates on them would undo its training.
+    /// 0 (the default): off.
+    #[serde(skip_serializing_if = "no_iterations")]
+    pub critic_warmup: u64,
+}
+
+fn no_iterations(n: &u64) -> bool {
+    *n == 0
 }
 
 impl CriticInput {
@@ -267,6 +278,7 @@ impl Default for PpoConfig {
             bound_coef: 0.0,
             critic: CriticInput::Actor,
             bound: 1.0,
+            critic_warmup: 0,
         }
     }
 }

@@ -16,6 +16,7 @@ pub mod envs;
 mod outputs;
 pub mod progress;
 mod rollout;
+mod warm;
 
 use envs::*;
 pub use progress::*;
@@ -509,10 +510,17 @@ impl Trainer {
             loss::surrogate_loss(&logp, &b.old_logp, &b.advantages, p.clip).map_err(e)?;
         let value = loss::value_loss(&values, &b.old_values, &b.returns, p.clip).map_err(e)?;
         let entropy = loss::entropy(log_std).map_err(e)?;
-        let mut total = (&surrogate + (&value * p.value_coef).map_err(e)?)
-            .and_then(|t| t - (&entropy * p.entropy_coef)?)
-            .map_err(e)?;
-        if p.bound_coef > 0.0 {
+        let critic_only = self.progress.iteration < p.critic_warmup;
+        let mut total = if critic_only {
+            // The policy's terms are left out of the graph: its variables get no gradient, and
+            // Adam leaves a variable without one as it is.
+            (&value * p.value_coef).map_err(e)?
+        } else {
+            (&surrogate + (&value * p.value_coef).map_err(e)?)
+                .and_then(|t| t - (&entropy * p.entropy_coef)?)
+                .map_err(e)?
+        };
+        if p.bound_coef > 0.0 && !critic_only {
             let bound = loss::bound_loss(&mu, p.bound).map_err(e)?;
             total = (total + (bound * p.bound_coef).map_err(e)?).map_err(e)?;
         }
