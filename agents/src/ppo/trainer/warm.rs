@@ -62,7 +62,7 @@ impl Trainer {
             ));
         }
         let scale = training.and_then(|t| t.noise_scale).unwrap_or(1.0);
-        if !(scale > 0.0) {
+        if scale.is_nan() || scale <= 0.0 {
             return Err(format!(
                 "{source}: it plays with {scale} times its trained noise, so its trained σ is lost"
             ));
@@ -70,7 +70,7 @@ impl Trainer {
         let std = ck.policy_std.as_ref().ok_or_else(|| {
             format!("{source}: no policy_std (it plays its mean action); training needs its σ")
         })?;
-        if std.len() != self.act_dim || std.iter().any(|s| !(*s > 0.0)) {
+        if std.len() != self.act_dim || std.iter().any(|s| s.is_nan() || *s <= 0.0) {
             return Err(format!(
                 "{source}: policy_std must hold {} entries > 0",
                 self.act_dim
