@@ -281,5 +281,27 @@ fn a_checkpoint_file_starts_a_run_that_keeps_its_policy_while_the_critic_warms_u
     ));
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--critic-warmup 2"));
+    // Left out, the run's own stands: the file it started with resumes it.
+    let out = rally(&train_args("512", "2", cfg, &b, &["--resume"]));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(saved_iteration(&b), Some(4));
+    // A path that is not there is named, and nothing is made of it.
+    let typo = base.join("kmac.jsn");
+    let c = base.join("c");
+    let out = rally(&train_args(
+        "256",
+        "2",
+        cfg,
+        &c,
+        &["--init", typo.to_str().unwrap(), "--critic-warmup", "2"],
+    ));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no such file"));
+    assert!(!typo.exists());
     let _ = std::fs::remove_dir_all(&base);
 }

@@ -193,7 +193,13 @@ fn a_resumed_run_is_the_same_run_bit_for_bit() {
     rally.ppo.hidden = vec![16, 16];
     let mut privileged = small(4, 8, 2);
     privileged.ppo.critic = CriticInput::Privileged;
-    for (k, cfg) in [small(4, 8, 2), rally, privileged].into_iter().enumerate() {
+    // And stopped inside a critic warm-up (the policy's own Adam steps are saved and resumed).
+    let mut warm = small(4, 8, 2);
+    warm.ppo.critic_warmup = 3;
+    for (k, cfg) in [small(4, 8, 2), rally, privileged, warm]
+        .into_iter()
+        .enumerate()
+    {
         let m = model();
         let mut straight = Trainer::new(m.clone(), Method::Kmac, cfg.clone(), 11).unwrap();
         for _ in 0..4 {
@@ -222,6 +228,7 @@ fn a_resumed_run_is_the_same_run_bit_for_bit() {
         }
         assert_eq!(weights(&resumed), weights(&straight), "{}", cfg.env.name());
         assert_eq!(resumed.adam.lr.to_bits(), straight.adam.lr.to_bits());
+        assert_eq!(resumed.adam.var_steps, straight.adam.var_steps);
         assert_eq!(resumed.normalizer, straight.normalizer);
         assert_eq!(resumed.critic_normalizer, straight.critic_normalizer);
         let strip = |rows: &[agents::ppo::trainer::CurveRow]| -> Vec<(u64, u64, u64)> {
@@ -747,6 +754,8 @@ fn a_checkpoint_file_warm_start_plays_as_the_checkpoint_and_its_critic_learns_al
         assert!((x / y - 1.0).abs() < 1e-6, "σ {x} vs trained {y}");
     }
     assert!(b.progress.warm_start.as_deref().unwrap().contains("a.json"));
+    // Its statistics move slowly, as in a long run: counted at least a million observations.
+    assert_eq!(b.normalizer.count, 1_000_000);
     // Its first two iterations move the critic only; the third the policy too.
     let actor = |t: &Trainer| {
         let w = weights(t);
@@ -767,11 +776,32 @@ fn a_checkpoint_file_warm_start_plays_as_the_checkpoint_and_its_critic_learns_al
         "the policy and σ keep still while the critic warms up"
     );
     assert_ne!(critic(&b), critic0, "the critic learns");
+    assert_eq!(
+        b.adam.lr, cfg.ppo.learning_rate,
+        "the adaptive schedule waits"
+    );
+    let n = b.net.actor.len() * 2;
+    let steps = (cfg.ppo.epochs * cfg.ppo.minibatches * 2) as u64;
+    let vs = b.adam.var_steps.clone();
+    let (policy_steps, critic_steps) = (vs[..n].to_vec(), vs[n..vs.len() - 1].to_vec());
+    assert!(
+        policy_steps.iter().all(|&s| s == 0) && vs[vs.len() - 1] == 0,
+        "{vs:?}"
+    );
+    assert!(critic_steps.iter().all(|&s| s == steps), "{vs:?}");
     b.iterate().unwrap();
     assert_ne!(
         actor(&b).0,
         policy0.0,
         "after the warm-up the policy learns"
+    );
+    let vs = &b.adam.var_steps;
+    assert!(
+        vs[..n]
+            .iter()
+            .chain(&vs[vs.len() - 1..])
+            .all(|&s| s == steps / 2),
+        "the policy's Adam counts its own steps: {vs:?}"
     );
     // What does not fit is refused, naming why.
     let mut other = small(4, 8, 10);
@@ -781,5 +811,22 @@ fn a_checkpoint_file_warm_start_plays_as_the_checkpoint_and_its_critic_learns_al
     assert!(err.contains("ppo.hidden"), "{err}");
     let mut d = Trainer::new(model(), Method::Muscle, small(4, 8, 10), 6).unwrap();
     let err = d.warm_start_from_checkpoint(&ck, "a.json").unwrap_err();
-    assert!(err.contains("kmac"), "{err}");
+    assert!(err.contains("training.method"), "{err}");
+    let mut gains = small(4, 8, 10);
+    gains.controller.kmac.kp = 20.0;
+    let mut f = Trainer::new(model(), Method::Kmac, gains, 6).unwrap();
+    let err = f.warm_start_from_checkpoint(&ck, "a.json").unwrap_err();
+    assert!(err.contains("controller.gains"), "{err}");
+    let mut tanh = ck.clone();
+    tanh.policy.as_mut().unwrap().layers[0].activation = agents::checkpoint::Activation::Tanh;
+    tanh.policy.as_mut().unwrap().layers[1].weights[0][0] += 1.0;
+    let mut g = Trainer::new(model(), Method::Kmac, cfg.clone(), 6).unwrap();
+    let before = (weights(&g), g.normalizer.clone());
+    let err = g.warm_start_from_checkpoint(&tanh, "a.json").unwrap_err();
+    assert!(err.contains("policy.layers[0].activation"), "{err}");
+    assert_eq!(
+        (weights(&g), g.normalizer.clone()),
+        before,
+        "a refused checkpoint changes nothing"
+    );
 }

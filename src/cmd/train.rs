@@ -373,7 +373,13 @@ fn resume(
             state.config.ppo.critic_warmup
         )));
     }
-    if args.config.is_some() && state.config != *config {
+    // What the flags lay over the configuration file was checked above; where a flag is left
+    // out, the run's own value stands (so a resume needs only the file it started with).
+    let mut config = config.clone();
+    config.env = state.config.env;
+    config.serve = state.config.serve;
+    config.ppo.critic_warmup = state.config.ppo.critic_warmup;
+    if args.config.is_some() && state.config != config {
         return Err(CliError::Usage(format!(
             "--resume: --config differs from the configuration {} was started with",
             args.out.display()
@@ -415,6 +421,12 @@ fn start(
         args.seed,
     )
     .map_err(|e| anyhow!(e))?;
+    if let Some(init) = args.init.as_ref().filter(|p| !p.exists()) {
+        return Err(CliError::Usage(format!(
+            "--init {}: no such file or directory (a run directory or a checkpoint file)",
+            init.display()
+        )));
+    }
     match &args.init {
         Some(init) if init.is_file() => {
             if args.init_optimizer == Some(InitOptimizer::Carry) {
@@ -426,7 +438,8 @@ fn start(
             if args.critic_warmup.is_none() && t.config.ppo.critic_warmup == 0 {
                 return Err(CliError::Usage(format!(
                     "--init {}: a checkpoint brings a policy but no critic; give --critic-warmup N \
-                     (iterations in which only the fresh critic learns, e.g. 20; 0 for none)",
+                     (or ppo.critic_warmup: iterations in which only the fresh critic learns, e.g. \
+                     20; 0 for none)",
                     init.display()
                 )));
             }

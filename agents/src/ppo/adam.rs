@@ -7,7 +7,7 @@
 use candle_core::backprop::GradStore;
 use candle_core::{Result, Tensor, Var};
 
-/// Adam's first and second moments per variable, and its step count.
+/// Adam's first and second moments per variable, and its step counts.
 pub struct Adam {
     vars: Vec<Var>,
     /// First moments, one per variable.
@@ -16,6 +16,11 @@ pub struct Adam {
     pub v: Vec<Tensor>,
     /// Steps taken.
     pub t: u64,
+    /// Steps each variable took part in (had a gradient), as PyTorch counts them per parameter:
+    /// the bias correction of a variable's moments counts its own updates, so a variable that
+    /// sat out steps (the policy during a critic warm-up) starts as a fresh Adam would start it.
+    /// Equal to `t` for every variable when every step updates all of them.
+    pub var_steps: Vec<u64>,
     /// Learning rate.
     pub lr: f64,
 }
@@ -33,6 +38,7 @@ impl Adam {
             .collect::<Result<Vec<_>>>()?;
         let v = m.clone();
         Ok(Adam {
+            var_steps: vec![0; vars.len()],
             vars,
             m,
             v,
@@ -44,10 +50,11 @@ impl Adam {
     /// One step on `grads` (variables without a gradient keep their value and moments).
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
         self.t += 1;
-        let c1 = 1.0 - BETA1.powi(self.t as i32);
-        let c2 = 1.0 - BETA2.powi(self.t as i32);
         for (k, var) in self.vars.iter().enumerate() {
             let Some(g) = grads.get(var) else { continue };
+            self.var_steps[k] += 1;
+            let c1 = 1.0 - BETA1.powi(self.var_steps[k] as i32);
+            let c2 = 1.0 - BETA2.powi(self.var_steps[k] as i32);
             let m = ((&self.m[k] * BETA1)? + (g * (1.0 - BETA1))?)?;
             let v = ((&self.v[k] * BETA2)? + (g.sqr()? * (1.0 - BETA2))?)?;
             let step = ((&m / c1)? / ((&v / c2)?.sqrt()? + EPS)?)?;
@@ -100,6 +107,28 @@ mod tests {
         for (g, w) in got.iter().zip([0.9f32, -1.9, 2.9]) {
             assert!((g - w).abs() < 1e-6, "{got:?}");
         }
+    }
+
+    #[test]
+    fn a_variable_that_sat_out_steps_starts_as_a_fresh_adam_would() {
+        // y takes no part in the first 50 steps (no gradient); its first step is then lr · sign(g),
+        // the bias correction counting its own updates, not the optimiser's.
+        let dev = &Device::Cpu;
+        let x = Var::from_tensor(&Tensor::new(&[1.0f32], dev).unwrap()).unwrap();
+        let y = Var::from_tensor(&Tensor::new(&[2.0f32], dev).unwrap()).unwrap();
+        let mut adam = Adam::new(vec![x.clone(), y.clone()], 0.1).unwrap();
+        for _ in 0..50 {
+            let loss = x.as_tensor().sqr().unwrap().sum_all().unwrap();
+            adam.step(&loss.backward().unwrap()).unwrap();
+        }
+        assert_eq!((adam.t, adam.var_steps.clone()), (50, vec![50, 0]));
+        let loss = (x.as_tensor().sqr().unwrap() + y.as_tensor().sqr().unwrap())
+            .unwrap()
+            .sum_all()
+            .unwrap();
+        adam.step(&loss.backward().unwrap()).unwrap();
+        let got = y.as_tensor().to_vec1::<f32>().unwrap()[0];
+        assert!((got - 1.9).abs() < 1e-6, "{got}");
     }
 
     #[test]

@@ -55,6 +55,10 @@ pub struct RunState {
     pub critic_normalizer: Option<RunningNormalizer>,
     /// Adam's steps taken.
     pub adam_steps: u64,
+    /// The steps each variable took part in, where they differ from `adam_steps` (a run that
+    /// began with a critic warm-up); absent: all of them took part in every step.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adam_var_steps: Option<Vec<u64>>,
     /// The learning rate now.
     pub learning_rate: f64,
 }
@@ -159,6 +163,12 @@ impl RunDir {
             normalizer: t.normalizer.clone(),
             critic_normalizer: t.critic_normalizer.clone(),
             adam_steps: t.adam.t,
+            adam_var_steps: t
+                .adam
+                .var_steps
+                .iter()
+                .any(|&n| n != t.adam.t)
+                .then(|| t.adam.var_steps.clone()),
             learning_rate: t.adam.lr,
         };
         let mut tensors: HashMap<String, Tensor> = t.net.named().into_iter().collect();
@@ -318,6 +328,20 @@ impl RunDir {
             adam.v[k] = take(format!("adam.v.{k}"))?;
         }
         adam.t = state.adam_steps;
+        adam.var_steps = match &state.adam_var_steps {
+            Some(steps) if steps.len() == adam.m.len() => steps.clone(),
+            Some(steps) => {
+                return Err(io(
+                    path,
+                    format!(
+                        "adam_var_steps holds {} counts for {} variables",
+                        steps.len(),
+                        adam.m.len()
+                    ),
+                ))
+            }
+            None => vec![state.adam_steps; adam.m.len()],
+        };
         t.adam = adam;
         Ok(())
     }

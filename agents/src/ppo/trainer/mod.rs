@@ -497,7 +497,9 @@ impl Trainer {
         let kl = loss::gaussian_kl(&b.old_means, old_log_std, &mu.detach(), &log_std.detach())
             .and_then(|k| k.to_scalar::<f32>())
             .map_err(e)? as f64;
-        if p.schedule == Schedule::Adaptive {
+        // While only the critic learns the policy keeps still: its KL says nothing to the schedule.
+        let critic_only = self.progress.iteration < p.critic_warmup;
+        if p.schedule == Schedule::Adaptive && !critic_only {
             if kl > 2.0 * p.desired_kl {
                 self.adam.lr = (self.adam.lr / 1.5).max(1e-5);
             } else if kl < p.desired_kl / 2.0 && kl > 0.0 {
@@ -510,10 +512,10 @@ impl Trainer {
             loss::surrogate_loss(&logp, &b.old_logp, &b.advantages, p.clip).map_err(e)?;
         let value = loss::value_loss(&values, &b.old_values, &b.returns, p.clip).map_err(e)?;
         let entropy = loss::entropy(log_std).map_err(e)?;
-        let critic_only = self.progress.iteration < p.critic_warmup;
         let mut total = if critic_only {
             // The policy's terms are left out of the graph: its variables get no gradient, and
-            // Adam leaves a variable without one as it is.
+            // Adam leaves a variable without one as it is (its first step after the warm-up is a
+            // fresh Adam's: the bias correction counts each variable's own steps).
             (&value * p.value_coef).map_err(e)?
         } else {
             (&surrogate + (&value * p.value_coef).map_err(e)?)
@@ -535,7 +537,7 @@ impl Trainer {
             });
         }
         self.adam.step(&grads).map_err(e)?;
-        if let Some(cap) = p.std_cap(self.progress.env_steps) {
+        if let Some(cap) = p.std_cap(self.progress.env_steps).filter(|_| !critic_only) {
             let ls = &self.net.log_std;
             let capped = ls.as_tensor().clamp(f32::MIN, cap.ln() as f32).map_err(e)?;
             ls.set(&capped).map_err(e)?;

@@ -100,7 +100,8 @@ pub struct Progress {
     pub recent: VecDeque<EpisodeStat>,
     /// One row per iteration.
     pub curve: Vec<CurveRow>,
-    /// The run directory this run's weights started from (a warm start), if any.
+    /// What this run's weights started from (a warm start: a run directory or a checkpoint file),
+    /// if anything.
     #[serde(default)]
     pub warm_start: Option<String>,
     /// Every validation so far (see [`super::ValidationConfig`]).
